@@ -1,0 +1,612 @@
+"""Robot hands: specs, a registry, the dm_control entity, mocap attachment and grasp-frame helpers.
+
+Four hands ship in ``hands/<name>/`` (``hand.xml``, ``spec.json``, ``scene.xml``, ``render.png``):
+``franka`` (2 DoF), ``allegro`` (16), ``shadow`` (20), ``skeleton`` (20). ``hands/build_hands.py``
+generates the MJCF and specs from published dimensions (primitive geoms only).
+
+Conventions (world: z up, metres; cabinets face -x, the hand approaches handles moving along +x):
+
+* Every hand has a site ``grasp_site``: where the handle centre sits in a power grasp.
+  Its **+z axis is the approach direction** (palm -> object; +x world when grasping a cabinet
+  handle), its **+x axis is the handle's long axis**, +y = z cross x (the direction the open fingers
+  extend; for the Franka gripper the finger-closing axis).
+* The hand's root body (``spec.root_body``, the wrist / flange) has the same orientation as the grasp
+  site in all four built-in hands; the site sits at ``spec.grasp_site_pos`` in the root frame.
+  User hands may declare any fixed offset (``grasp_site_pos``, ``grasp_site_quat``).
+* ``orientation_for_handle("horizontal")``: site +x = +y world, +z = +x world (fingers point up).
+  ``orientation_for_handle("vertical")``: site +x = -z world, +z = +x world (fingers point +y).
+* The hand MJCF has no freejoint or mocap body. ``attach_with_mocap`` adds both to an arena: the
+  hand gets a freejoint and a soft weld to a mocap body; the root only ever moves through the mocap
+  body after reset (``MocapHandle.reset_pose`` places both together, ``MocapHandle.move`` moves the
+  mocap target only).
+* Finger actuators are position actuators, one per joint, in ``spec.actuator_names`` order;
+  ``spec.open_pose`` and ``spec.grasp_profiles[...]`` are targets in that order.
+
+Quaternions are (w, x, y, z) as in MuJoCo.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from opend_mj import PROJECT_ROOT
+
+HANDS_DIR = PROJECT_ROOT / "hands"
+BUILTIN_HANDS = ("franka", "allegro", "shadow", "skeleton")
+
+#: Project physics options (DESIGN.md).
+PHYSICS_OPTIONS = dict(timestep=0.002, integrator="implicitfast", cone="elliptic", impratio=10)
+
+#: The mocap weld: soft enough not to fight contacts, stiff enough to pull a stiff drawer
+#: (time constant 20 ms, critically damped; ~0.5 mm static offset per 10 N on a 1 kg hand).
+WELD_SOLREF = (0.02, 1.0)
+WELD_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Spec
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class HandSpec:
+    """Everything a task or planner needs to know about a hand, saved as ``spec.json``."""
+
+    name: str
+    dof: int
+    joint_names: list[str]
+    actuator_names: list[str]
+    open_pose: list[float]
+    grasp_profiles: dict[str, list[float]]
+    grasp_site: str = "grasp_site"
+    root_body: str = "palm"
+    #: grasp-site pose in the root-body frame (position, quaternion w x y z).
+    grasp_site_pos: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    grasp_site_quat: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0, 0.0])
+    pregrasp_profiles: dict[str, list[float]] = field(default_factory=dict)
+    joint_ranges: dict[str, list[float]] = field(default_factory=dict)
+    joint_roles: dict[str, str] = field(default_factory=dict)
+    hand_type: str = "dexterous"
+    #: extra distance (m) along the approach axis to stop short of the handle (0: site at centre).
+    approach_offset: float = 0.0
+    #: seconds to ramp from open to closed targets.
+    close_time: float = 0.5
+    mass: float = 0.0
+    convention: str = ""
+    notes: str = ""
+
+    def __post_init__(self) -> None:
+        if self.dof != len(self.joint_names) or self.dof != len(self.actuator_names):
+            raise ValueError(f"hand {self.name!r}: dof {self.dof} does not match "
+                             f"{len(self.joint_names)} joints / {len(self.actuator_names)} actuators")
+        for key in ("horizontal", "vertical"):
+            if key not in self.grasp_profiles:
+                raise ValueError(f"hand {self.name!r}: grasp_profiles needs {key!r}")
+        for key, prof in list(self.grasp_profiles.items()) + list(self.pregrasp_profiles.items()):
+            if len(prof) != len(self.actuator_names):
+                raise ValueError(f"hand {self.name!r}: profile {key!r} has {len(prof)} targets, "
+                                 f"expected {len(self.actuator_names)}")
+        if len(self.open_pose) != len(self.actuator_names):
+            raise ValueError(f"hand {self.name!r}: open_pose has wrong length")
+
+    def grasp_profile(self, orientation: str) -> np.ndarray:
+        return np.asarray(self.grasp_profiles[orientation], dtype=float)
+
+    def pregrasp_profile(self, orientation: str) -> np.ndarray:
+        return np.asarray(self.pregrasp_profiles.get(orientation, self.open_pose), dtype=float)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "HandSpec":
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in data.items() if k in names})
+
+    def save(self, path: str | os.PathLike) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "HandSpec":
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+# --------------------------------------------------------------------------------------------------
+# Registry
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class HandEntry:
+    name: str
+    xml_path: Path
+    spec: HandSpec
+
+
+_REGISTRY: dict[str, HandEntry] = {}
+
+
+def register_hand(name: str, xml_path: str | os.PathLike, spec: HandSpec | dict | str | os.PathLike,
+                  *, overwrite: bool = False) -> HandEntry:
+    """Register a hand: any MJCF (no freejoint/mocap in it) plus a spec (HandSpec, dict or JSON
+    path). The MJCF must contain ``spec.root_body``, ``spec.grasp_site`` and the named joints and
+    actuators. Returns the entry; ``get_hand(name)`` and ``Hand(name)`` then find it."""
+    if isinstance(spec, (str, os.PathLike)):
+        spec = HandSpec.load(spec)
+    elif isinstance(spec, dict):
+        spec = HandSpec.from_dict(spec)
+    xml_path = Path(xml_path).resolve()
+    if not xml_path.is_file():
+        raise FileNotFoundError(xml_path)
+    if name in _REGISTRY and not overwrite and _REGISTRY[name].xml_path != xml_path:
+        raise ValueError(f"hand {name!r} is already registered (pass overwrite=True)")
+    if spec.name != name:
+        spec = dataclasses.replace(spec, name=name)
+    entry = HandEntry(name, xml_path, spec)
+    _REGISTRY[name] = entry
+    return entry
+
+
+def _ensure_builtin() -> None:
+    for n in BUILTIN_HANDS:
+        if n not in _REGISTRY and (HANDS_DIR / n / "hand.xml").is_file():
+            _REGISTRY[n] = HandEntry(n, (HANDS_DIR / n / "hand.xml").resolve(),
+                                     HandSpec.load(HANDS_DIR / n / "spec.json"))
+
+
+def get_hand(name: str) -> HandEntry:
+    _ensure_builtin()
+    if name not in _REGISTRY:
+        raise KeyError(f"unknown hand {name!r}; known: {', '.join(list_hands())}")
+    return _REGISTRY[name]
+
+
+def list_hands() -> list[str]:
+    _ensure_builtin()
+    return list(_REGISTRY)
+
+
+def load_spec(name: str) -> HandSpec:
+    """The spec of a registered (or built-in) hand."""
+    return get_hand(name).spec
+
+
+# --------------------------------------------------------------------------------------------------
+# Rotation helpers (numpy only)
+# --------------------------------------------------------------------------------------------------
+def quat_to_mat(q) -> np.ndarray:
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def mat_to_quat(m) -> np.ndarray:
+    m = np.asarray(m, dtype=float)
+    t = np.trace(m)
+    if t > 0:
+        s = np.sqrt(t + 1.0) * 2
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    q = np.asarray(q)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def quat_mul(a, b) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def orientation_for_handle(orientation: str, approach=(1.0, 0.0, 0.0)) -> np.ndarray:
+    """Grasp-site quaternion for a handle approached along ``approach`` (default +x world).
+
+    horizontal: site x (handle axis) = horizontal, perpendicular to the approach (+y world for the
+    default approach), so the open fingers point up (+z world).
+    vertical: site x = -z world, so the open fingers point to the +y side.
+    """
+    z = np.asarray(approach, dtype=float)
+    z /= np.linalg.norm(z)
+    if orientation == "horizontal":
+        x = np.cross((0.0, 0.0, 1.0), z)
+        if np.linalg.norm(x) < 1e-6:
+            raise ValueError("horizontal handle needs a non-vertical approach")
+    elif orientation == "vertical":
+        x = np.array([0.0, 0.0, -1.0])
+        x = x - z * (x @ z)
+        if np.linalg.norm(x) < 1e-6:
+            raise ValueError("vertical handle needs a non-vertical approach")
+    else:
+        raise ValueError(f"orientation must be 'horizontal' or 'vertical', not {orientation!r}")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return mat_to_quat(np.column_stack([x, y, z]))
+
+
+def grasp_pose_to_root_pose(spec: HandSpec, site_pos, site_quat) -> tuple[np.ndarray, np.ndarray]:
+    """Root (= mocap) pose that puts the grasp site at ``site_pos`` with orientation ``site_quat``."""
+    r_site = quat_to_mat(site_quat)
+    r_off = quat_to_mat(spec.grasp_site_quat)  # site orientation in the root frame
+    r_root = r_site @ r_off.T
+    root_pos = np.asarray(site_pos, float) - r_root @ np.asarray(spec.grasp_site_pos, float)
+    return root_pos, mat_to_quat(r_root)
+
+
+def root_pose_to_grasp_pose(spec: HandSpec, root_pos, root_quat) -> tuple[np.ndarray, np.ndarray]:
+    r_root = quat_to_mat(root_quat)
+    pos = np.asarray(root_pos, float) + r_root @ np.asarray(spec.grasp_site_pos, float)
+    return pos, mat_to_quat(r_root @ quat_to_mat(spec.grasp_site_quat))
+
+
+# --------------------------------------------------------------------------------------------------
+# dm_control entity and mocap attachment
+# --------------------------------------------------------------------------------------------------
+from dm_control import composer, mjcf  # noqa: E402  (after the pure-numpy helpers on purpose)
+
+
+class Hand(composer.Entity):
+    """A hand as a composer Entity, loaded from its registered MJCF (``hands/<name>/hand.xml``)."""
+
+    def _build(self, name: str = "allegro") -> None:
+        entry = get_hand(name)
+        self._spec = entry.spec
+        self._mjcf_root = mjcf.from_path(str(entry.xml_path))
+        self._mjcf_root.model = name
+        self._root_body = self._mjcf_root.find("body", self._spec.root_body)
+        if self._root_body is None:
+            raise ValueError(f"hand {name!r}: no body {self._spec.root_body!r}")
+        self._grasp_site = self._mjcf_root.find("site", self._spec.grasp_site)
+        if self._grasp_site is None:
+            raise ValueError(f"hand {name!r}: no site {self._spec.grasp_site!r}")
+        self._joints = [self._mjcf_root.find("joint", j) for j in self._spec.joint_names]
+        self._actuators = [self._mjcf_root.find("actuator", a) for a in self._spec.actuator_names]
+        if any(j is None for j in self._joints) or any(a is None for a in self._actuators):
+            raise ValueError(f"hand {name!r}: spec names joints/actuators missing from the MJCF")
+        if self._mjcf_root.find_all("joint") and any(
+                j.tag == "freejoint" or getattr(j, "type", None) == "free"
+                for j in self._mjcf_root.find_all("joint")):
+            raise ValueError(f"hand {name!r}: the hand MJCF must not contain a freejoint")
+
+    @property
+    def mjcf_model(self):
+        return self._mjcf_root
+
+    @property
+    def spec(self) -> HandSpec:
+        return self._spec
+
+    @property
+    def root_body(self):
+        return self._root_body
+
+    @property
+    def actuators(self):
+        return list(self._actuators)
+
+    @property
+    def joints(self):
+        return list(self._joints)
+
+    @property
+    def grasp_site(self):
+        return self._grasp_site
+
+    def set_finger_targets(self, physics, targets) -> None:
+        physics.bind(self._actuators).ctrl = np.asarray(targets, dtype=float)
+
+    def set_finger_qpos(self, physics, qpos) -> None:
+        """Reset-time only: put the finger joints at ``qpos`` (e.g. the open pose)."""
+        physics.bind(self._joints).qpos = np.asarray(qpos, dtype=float)
+        physics.bind(self._joints).qvel = 0.0
+
+
+@dataclass
+class MocapHandle:
+    """Names and helpers for a hand attached with :func:`attach_with_mocap`.
+
+    Full names (``name``) are the ones in the compiled model, e.g. ``hand/palm``."""
+
+    hand: Hand
+    mocap_body: Any  # mjcf element in the arena
+    weld: Any  # mjcf equality element
+    freejoint: Any  # mjcf freejoint element on the attachment frame
+
+    @property
+    def mocap_body_name(self) -> str:
+        return self.mocap_body.full_identifier
+
+    @property
+    def weld_name(self) -> str:
+        return self.weld.full_identifier
+
+    @property
+    def root_body_name(self) -> str:
+        return self.hand.root_body.full_identifier
+
+    @property
+    def grasp_site_name(self) -> str:
+        return self.hand.grasp_site.full_identifier
+
+    @property
+    def freejoint_name(self) -> str:
+        return self.freejoint.full_identifier
+
+    def mocap_id(self, physics) -> int:
+        bid = physics.model.name2id(self.mocap_body.full_identifier, "body")
+        return int(physics.model.body_mocapid[bid])
+
+    def move(self, physics, pos, quat=None) -> None:
+        """Move the mocap target (the only way the root moves after reset)."""
+        mid = self.mocap_id(physics)
+        physics.data.mocap_pos[mid] = pos
+        if quat is not None:
+            physics.data.mocap_quat[mid] = quat
+
+    def mocap_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
+        mid = self.mocap_id(physics)
+        return physics.data.mocap_pos[mid].copy(), physics.data.mocap_quat[mid].copy()
+
+    def reset_pose(self, physics, pos, quat) -> None:
+        """Reset-time only: place the hand root and the mocap body at the same pose, at rest."""
+        self.move(physics, pos, quat)
+        fj = physics.bind(self.freejoint)
+        fj.qpos = np.concatenate([np.asarray(pos, float), np.asarray(quat, float)])
+        fj.qvel = 0.0
+
+    def move_grasp_site(self, physics, site_pos, site_quat) -> None:
+        """Move the mocap so that the grasp site (at rest) lands at ``site_pos``/``site_quat``."""
+        self.move(physics, *grasp_pose_to_root_pose(self.hand.spec, site_pos, site_quat))
+
+    def root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
+        b = physics.bind(self.hand.root_body)
+        return b.xpos.copy(), b.xquat.copy()
+
+    def grasp_site_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
+        s = physics.bind(self.hand.grasp_site)
+        return s.xpos.copy(), mat_to_quat(s.xmat.reshape(3, 3))
+
+
+def attach_with_mocap(arena_mjcf, hand: Hand, *, solref=WELD_SOLREF, solimp=WELD_SOLIMP,
+                      mocap_name: str = "hand_mocap") -> MocapHandle:
+    """Attach ``hand`` to ``arena_mjcf`` (an mjcf RootElement or a composer Arena) as a free entity
+    and drive its root with a mocap body through a soft 6-DoF weld.
+
+    The weld's relpose is the identity: the hand root coincides with the mocap body at rest."""
+    root = getattr(arena_mjcf, "mjcf_model", arena_mjcf)
+    frame = root.attach(hand.mjcf_model)
+    freejoint = frame.add("freejoint")
+    mocap = root.worldbody.add("body", name=mocap_name, mocap="true")
+    mocap.add("site", name=f"{mocap_name}_site", size=[0.004], rgba=[0, 1, 0, 0.3], group=5)
+    weld = root.equality.add("weld", name=f"{mocap_name}_weld", body1=mocap, body2=hand.root_body,
+                             relpose=[0, 0, 0, 1, 0, 0, 0], solref=list(solref),
+                             solimp=list(solimp))
+    return MocapHandle(hand=hand, mocap_body=mocap, weld=weld, freejoint=freejoint)
+
+
+def set_physics_options(root) -> None:
+    """Apply the project's physics options (DESIGN.md) to an mjcf RootElement."""
+    for k, v in PHYSICS_OPTIONS.items():
+        setattr(root.option, k, v)
+
+
+def build_scene(name: str, *, pos=(0.0, 0.0, 0.35), quat=None) -> tuple[Any, MocapHandle]:
+    """A standalone scene: floor, light, the hand on a mocap weld (for viewing and tests)."""
+    root = mjcf.RootElement(model=f"{name}_scene")
+    set_physics_options(root)
+    root.visual.headlight.ambient = [0.4, 0.4, 0.4]
+    root.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+    getattr(root.visual, "global").offwidth = 1280
+    getattr(root.visual, "global").offheight = 960
+    root.asset.add("texture", name="grid", type="2d", builtin="checker", rgb1=[0.82, 0.84, 0.86],
+                   rgb2=[0.72, 0.74, 0.76], width=256, height=256)
+    root.asset.add("material", name="grid", texture="grid", texrepeat=[8, 8], reflectance=0.05)
+    root.worldbody.add("geom", name="floor", type="plane", size=[2, 2, 0.05], material="grid")
+    root.worldbody.add("light", name="key", pos=[0.6, -0.6, 1.5], dir=[-0.4, 0.4, -1],
+                       diffuse=[0.7, 0.7, 0.7], castshadow=False)
+    hand = Hand(name)
+    handle = attach_with_mocap(root, hand)
+    if quat is None:
+        quat = orientation_for_handle("horizontal")
+    root_pos, root_quat = np.asarray(pos, float), np.asarray(quat, float)
+    handle.mocap_body.pos = root_pos
+    handle.mocap_body.quat = root_quat
+    # initial placement of the free hand at the mocap pose (qpos0), so nothing jumps at t=0
+    hand_frame = mjcf.get_attachment_frame(hand.mjcf_model)
+    hand_frame.pos = root_pos
+    hand_frame.quat = root_quat
+    return root, handle
+
+
+def write_scene_xml(name: str, path: str | os.PathLike | None = None) -> Path:
+    """Write ``hands/<name>/scene.xml`` (self-contained: the hand is inlined)."""
+    root, _ = build_scene(name)
+    path = Path(path) if path else HANDS_DIR / name / "scene.xml"
+    xml = root.to_xml_string()
+    path.write_text(f"<!-- Generated by opend_mj.hands.write_scene_xml('{name}'). -->\n" + xml)
+    return path
+
+
+# --------------------------------------------------------------------------------------------------
+# Rendering
+# --------------------------------------------------------------------------------------------------
+def render_hand(name: str, out: str | os.PathLike, *, width: int = 480, height: int = 360,
+                pose: str = "open") -> Path:
+    """Render the hand off-screen to a PNG. ``pose``: "open" or "horizontal"/"vertical" (grasp)."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    import mujoco
+    from PIL import Image
+
+    root, handle = build_scene(name, pos=(0.0, 0.0, 0.3),
+                               quat=mat_to_quat(np.column_stack([(1, 0, 0), (0, 0, 1), (0, -1, 0)])))
+    physics = mjcf.Physics.from_mjcf_model(root)
+    spec = handle.hand.spec
+    targets = spec.open_pose if pose == "open" else spec.grasp_profiles[pose]
+    handle.hand.set_finger_qpos(physics, targets)
+    handle.hand.set_finger_targets(physics, targets)
+    physics.forward()
+    model, data = physics.model.ptr, physics.data.ptr
+    rb = physics.bind(handle.hand.root_body)
+    gp = np.asarray(spec.grasp_site_pos, float)
+    centre = rb.xpos + rb.xmat.reshape(3, 3) @ np.array([gp[0], gp[1] * 0.8, gp[2] * 0.5])
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = centre
+    cam.distance = 0.42 if spec.hand_type != "parallel_gripper" else 0.36
+    cam.azimuth = 60.0
+    cam.elevation = -20.0
+    renderer = mujoco.Renderer(model, height=height, width=width)
+    try:
+        renderer.update_scene(data, camera=cam)
+        img = renderer.render()
+    finally:
+        renderer.close()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(img).save(out, optimize=True)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Bar-pull trial: the grasp check used by the tests and tools/bench_hands.py
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class BarConfig:
+    """A bar handle on a damped, frictional slide joint along x: a stand-in for a stiff drawer."""
+
+    centre: tuple[float, float, float] = (0.5, 0.0, 0.6)
+    radius: float = 0.0065  # 13 mm bar
+    length: float = 0.20
+    standoff: float = 0.035  # bar centre to plate front face
+    damping: float = 40.0  # N s / m
+    frictionloss: float = 8.0  # N
+    mass: float = 2.0  # kg (drawer)
+    plate_half: tuple[float, float] = (0.2, 0.1)  # plate half extent along / across the bar
+
+
+def build_bar_scene(name: str, orientation: str, bar: BarConfig | None = None):
+    """Scene: floor, light, a plate+bar "drawer" facing -x, the hand on its mocap weld."""
+    bar = bar or BarConfig()
+    root, handle = build_scene(name)
+    cx, cy, cz = bar.centre
+    plate_x = cx + bar.standoff
+    drawer = root.worldbody.add("body", name="drawer", pos=[cx, cy, cz])
+    drawer.add("joint", name="drawer_slide", type="slide", axis=[1, 0, 0], range=[-0.4, 0.02],
+               damping=bar.damping, frictionloss=bar.frictionloss, armature=0.0)
+    drawer.add("inertial", pos=[bar.standoff + 0.01, 0, 0], mass=bar.mass,
+               diaginertia=[0.02, 0.02, 0.02])
+    along = np.array([0.0, 1.0, 0.0]) if orientation == "horizontal" else np.array([0.0, 0.0, 1.0])
+    across = np.array([0.0, 0.0, 1.0]) if orientation == "horizontal" else np.array([0.0, 1.0, 0.0])
+    half = along * bar.plate_half[0] + across * bar.plate_half[1]
+    drawer.add("geom", name="plate", type="box", pos=[bar.standoff + 0.01, 0, 0],
+               size=[0.01, max(half[1], 0.01), max(half[2], 0.01)], rgba=[0.6, 0.45, 0.3, 1],
+               condim=4, friction=[1, 0.02, 0.0002])
+    end = along * bar.length / 2
+    drawer.add("geom", name="handle_bar", type="capsule", fromto=np.concatenate([-end, end]),
+               size=[bar.radius], rgba=[0.7, 0.7, 0.75, 1], condim=4,
+               friction=[1, 0.02, 0.0002], solref=[0.004, 1], solimp=[0.95, 0.99, 0.001])
+    for s in (-1, 1):
+        p = along * s * (bar.length / 2 - 0.012)
+        drawer.add("geom", name=f"handle_post_{'ab'[s > 0]}", type="capsule",
+                   fromto=np.concatenate([p, p + np.array([bar.standoff, 0, 0])]),
+                   size=[bar.radius * 0.9], rgba=[0.7, 0.7, 0.75, 1], condim=4)
+    return root, handle, drawer
+
+
+@dataclass
+class TrialResult:
+    hand: str
+    orientation: str
+    bar_moved: float  # m the bar moved toward -x (drawer opened)
+    slip: float  # m the bar moved relative to the grasp site during the pull
+    mocap_pull: float  # m the mocap was pulled
+    root_lag: float  # m between mocap and root at the end of the pull
+    steps: int
+    wall_s: float
+
+    @property
+    def steps_per_s(self) -> float:
+        return self.steps / self.wall_s
+
+
+def bar_pull_trial(name: str, orientation: str, *, bar: BarConfig | None = None,
+                   start_back: float = 0.12, approach_speed: float = 0.15,
+                   pull_speed: float = 0.1, pull_distance: float = 0.15) -> TrialResult:
+    """Approach a bar along +x (mocap moving ``approach_speed`` m/s, 0.3 mm per 2 ms step), close
+    the fingers with the hand's grasp profile, pull the mocap back by ``pull_distance``. Fingers hold
+    by contact and friction only."""
+    import time
+
+    import mujoco
+
+    bar = bar or BarConfig()
+    root, handle, drawer = build_bar_scene(name, orientation, bar)
+    physics = mjcf.Physics.from_mjcf_model(root)
+    m, d = physics.model.ptr, physics.data.ptr
+    spec = handle.hand.spec
+    site_quat = orientation_for_handle(orientation)
+    centre = np.asarray(bar.centre, float)
+    target = centre - np.array([spec.approach_offset, 0.0, 0.0])
+    start = target - np.array([start_back, 0.0, 0.0])
+    pos, quat = grasp_pose_to_root_pose(spec, start, site_quat)
+    handle.reset_pose(physics, pos, quat)
+    pre = spec.pregrasp_profile(orientation)
+    closed = spec.grasp_profile(orientation)
+    handle.hand.set_finger_qpos(physics, pre)
+    handle.hand.set_finger_targets(physics, pre)
+    physics.forward()
+    act_ids = [physics.bind(a).element_id for a in handle.hand.actuators]
+    slide = physics.bind(drawer.find("joint", "drawer_slide"))
+    site = physics.bind(handle.hand.grasp_site)
+    root_b = physics.bind(handle.hand.root_body)
+    mid = handle.mocap_id(physics)
+    dt = m.opt.timestep
+    steps = 0
+    t0 = time.perf_counter()
+
+    def step(n=1):
+        nonlocal steps
+        for _ in range(n):
+            mujoco.mj_step(m, d)
+        steps += n
+
+    # approach
+    n_app = int(round(start_back / (approach_speed * dt)))
+    for i in range(1, n_app + 1):
+        site_p = start + np.array([start_back * i / n_app, 0, 0])
+        d.mocap_pos[mid], d.mocap_quat[mid] = grasp_pose_to_root_pose(spec, site_p, site_quat)
+        step()
+    step(int(0.1 / dt))
+    # close
+    n_close = max(1, int(spec.close_time / dt))
+    for i in range(1, n_close + 1):
+        d.ctrl[act_ids] = pre + (closed - pre) * i / n_close
+        step()
+    step(int(0.3 / dt))
+    # pull
+    q_start = float(slide.qpos[0])
+    rel_start = float(site.xpos[0] - (centre[0] + slide.qpos[0]))
+    mocap0 = d.mocap_pos[mid].copy()
+    n_pull = int(round(pull_distance / (pull_speed * dt)))
+    for i in range(1, n_pull + 1):
+        d.mocap_pos[mid] = mocap0 - np.array([pull_distance * i / n_pull, 0, 0])
+        step()
+    step(int(0.2 / dt))
+    wall = time.perf_counter() - t0
+    moved = q_start - float(slide.qpos[0])
+    rel_end = float(site.xpos[0] - (centre[0] + slide.qpos[0]))
+    lag = float(np.linalg.norm(root_b.xpos - d.mocap_pos[mid]))
+    return TrialResult(name, orientation, moved, abs(rel_end - rel_start), pull_distance, lag,
+                       steps, wall)

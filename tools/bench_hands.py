@@ -1,0 +1,43 @@
+"""Steps per second of mj_step for each hand: alone in the air, and while grasping and pulling the
+test bar (approach, close, pull). Usage: python tools/bench_hands.py [hand ...] [--seconds S]"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import mujoco
+from dm_control import mjcf
+
+from opend_mj import hands
+
+
+def bench_alone(name: str, seconds: float) -> float:
+    root, handle = hands.build_scene(name)
+    physics = mjcf.Physics.from_mjcf_model(root)
+    m, d = physics.model.ptr, physics.data.ptr
+    handle.hand.set_finger_targets(physics, handle.hand.spec.open_pose)
+    n = int(seconds / m.opt.timestep)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        mujoco.mj_step(m, d)
+    return n / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("hands", nargs="*", default=hands.list_hands())
+    ap.add_argument("--seconds", type=float, default=4.0, help="simulated seconds for 'alone'")
+    args = ap.parse_args()
+    print(f"{'hand':10s} {'alone st/s':>11s} {'grasp H st/s':>13s} {'grasp V st/s':>13s}"
+          f" {'moved H cm':>10s} {'moved V cm':>10s}")
+    for name in args.hands:
+        alone = bench_alone(name, args.seconds)
+        rh = hands.bar_pull_trial(name, "horizontal")
+        rv = hands.bar_pull_trial(name, "vertical")
+        print(f"{name:10s} {alone:11.0f} {rh.steps_per_s:13.0f} {rv.steps_per_s:13.0f}"
+              f" {rh.bar_moved * 100:10.1f} {rv.bar_moved * 100:10.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
