@@ -79,3 +79,17 @@ def test_decoration_never_enters_keepout(keepout):
                 for klo, khi in arena.keepout_boxes:
                     inside = np.all(lo < khi - 1e-6) and np.all(klo + 1e-6 < hi)
                     assert not inside, (ROOM_NAMES[room], seed, g.name, lo, hi, klo, khi)
+
+
+def test_attach_cabinet_at_origin():
+    from dm_control import composer
+
+    cab = mjcf.RootElement(model="cabinet")
+    cab.worldbody.add("geom", name="carcass", type="box", pos=[0, 0, 0.5], size=[0.3, 0.4, 0.5])
+    arena = RoomArena(4, 0)
+    arena.attach_cabinet(composer.ModelWrapperEntity(cab))
+    physics = mjcf.Physics.from_mjcf_model(arena.mjcf_model)
+    physics.forward()
+    np.testing.assert_allclose(physics.named.data.geom_xpos["cabinet/carcass"], [0, 0, 0.5], atol=1e-9)
+    # The carcass rests on the floor plane: the floor is the only arena geom it can touch.
+    assert physics.model.ptr.geom_contype[physics.bind(arena.floor).element_id] == 1

@@ -31,11 +31,15 @@ impratio 10, noslip off (the dm_control base arena turns on 5 noslip iterations;
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
-from typing import Callable
+import os
 
-import numpy as np
-from dm_control import composer, mjcf
+os.environ.setdefault("MUJOCO_GL", "egl")  # before dm_control picks a GL backend
+
+from dataclasses import dataclass  # noqa: E402
+from typing import Callable  # noqa: E402
+
+import numpy as np  # noqa: E402
+from dm_control import composer, mjcf  # noqa: E402
 
 __all__ = ["ROOM_NAMES", "RoomArena", "KeepOut"]
 
@@ -117,9 +121,9 @@ def _tex_brick(rng, brick, mortar, size=128) -> np.ndarray:
         for c in range(-1, w // bw + 1):
             x0 = c * bw + off
             col = np.asarray(brick) * (1.0 + rng.normal(0, 0.08))
-            xs = slice(max(x0 + 1, 0), min(x0 + bw - 1, w))
+            xs = slice(max(x0 + 2, 0), min(x0 + bw - 1, w))
             if xs.start < xs.stop:
-                img[r * bh + 1 : (r + 1) * bh - 1, xs] = col
+                img[r * bh + 2 : (r + 1) * bh - 1, xs] = col
     img *= 1.0 + rng.normal(0, 0.03, size=(h, w, 1))
     return img * 255.0
 
@@ -771,10 +775,16 @@ class RoomArena(composer.Arena):
         W, H, t = self.half_width, self.ceiling, 0.1
         self.floor = wb.add("geom", name="floor", type="plane", pos=[cx, 0, 0], size=[hx, W, 0.1], material="floor",
                             friction=[1.0, 0.005, 0.0001], group=0)
-        self._deco_geom(wb, name="wall_back", type="box", pos=[self.back_x + t, 0, H / 2], size=[t, W + 2 * t, H / 2], material="wall")
-        self._deco_geom(wb, name="wall_front", type="box", pos=[self.front_x - t, 0, H / 2], size=[t, W + 2 * t, H / 2], material="wall")
-        for s, nm in ((1, "wall_left"), (-1, "wall_right")):
-            self._deco_geom(wb, name=nm, type="box", pos=[cx, s * (W + t), H / 2], size=[hx, t, H / 2], material="wall")
+        # Walls are finite visual planes facing into the room: a plane maps a 2D texture onto its own
+        # x-y axes (boxes would smear it along one axis), and texrepeat then counts repeats per metre.
+        walls = (
+            ("wall_back", [self.back_x, 0, H / 2], [0, -1, 0, 0, 0, 1], W),
+            ("wall_front", [self.front_x, 0, H / 2], [0, 1, 0, 0, 0, 1], W),
+            ("wall_left", [cx, W, H / 2], [1, 0, 0, 0, 0, 1], hx),
+            ("wall_right", [cx, -W, H / 2], [-1, 0, 0, 0, 0, 1], hx),
+        )
+        for nm, pos, xy, half in walls:
+            self._deco_geom(wb, name=nm, type="plane", pos=pos, xyaxes=xy, size=[half, H / 2, 0.1], material="wall")
         self._deco_geom(wb, name="ceiling", type="box", pos=[cx, 0, H + t], size=[hx + 2 * t, W + 2 * t, t], rgba=[0.95, 0.95, 0.93, 1])
         # skirting boards (and a wood panel for wainscot walls)
         skirt_h = 0.45 if self.wall_kind == "wainscot" else 0.04
