@@ -675,6 +675,25 @@ def _translate(p: Piece, d: tuple[float, float, float]) -> Piece:
     return Cylinder(tuple(np.asarray(p.p0) + dv), tuple(np.asarray(p.p1) + dv), p.radius)
 
 
+def _unshare_vertices(visuals: list[Visual]) -> list[Visual]:
+    """Shrink the k-th box of a link by (k+1) * 10 um so that no two pieces share a vertex position.
+
+    Touching panels (a side and the top, a drawer's bottom and side) would otherwise share corners, and a
+    compiler that welds vertices by position would merge them into one non-convex piece.
+    """
+    out, k = [], 0
+    for v in visuals:
+        pieces: list[Piece] = []
+        for p in v.pieces:
+            if isinstance(p, Box):
+                k += 1
+                e = 1e-5 * k
+                p = Box(tuple(np.asarray(p.lo) + e), tuple(np.asarray(p.hi) - e))
+            pieces.append(p)
+        out.append(Visual(v.part, pieces, v.material))
+    return out
+
+
 def _bounds_of(pieces: list[Piece]) -> tuple[np.ndarray, np.ndarray]:
     bs = [piece_bounds(p) for p in pieces]
     return np.min([b[0] for b in bs], axis=0), np.max([b[1] for b in bs], axis=0)
@@ -800,7 +819,7 @@ def generate_source(index: int, seed: int, out_root: Path, config: GeneratorConf
     for i, tg in enumerate(targets):
         p = np.asarray(tg.origin) / s
         xml.append(f'\t<link name="link_{i}">\n')
-        xml.extend(emit(tg.visuals, tuple(-p)))
+        xml.extend(emit(_unshare_vertices(tg.visuals), tuple(-p)))
         xml.append("\t</link>\n")
         upper = tg.upper / s if tg.joint_type == "prismatic" else tg.upper
         xml.append(
@@ -810,7 +829,7 @@ def generate_source(index: int, seed: int, out_root: Path, config: GeneratorConf
             f'\t\t<limit lower="0.0" upper="{_fmt(upper, nd)}"/>\n\t</joint>\n')
         sem.append(f"link_{i} {'slider drawer' if tg.kind == 'drawer' else 'hinge rotation_door'}")
     xml.append(f'\t<link name="{body_link}">\n')
-    xml.extend(emit(carcass, (0.0, 0.0, 0.0)))
+    xml.extend(emit(_unshare_vertices(carcass), (0.0, 0.0, 0.0)))
     xml.append("\t</link>\n")
     xml.append(f'\t<joint name="joint_{n}" type="fixed">\n'
                '\t\t<origin rpy="1.570796326794897 0 -1.570796326794897" xyz="0 0 0"/>\n'
