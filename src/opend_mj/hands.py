@@ -38,6 +38,9 @@ import numpy as np
 
 from opend_mj import PROJECT_ROOT
 
+# Off-screen rendering goes through EGL (Mesa works without a GPU); must be set before mujoco loads.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
 HANDS_DIR = PROJECT_ROOT / "hands"
 BUILTIN_HANDS = ("franka", "allegro", "shadow", "skeleton")
 
