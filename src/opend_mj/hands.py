@@ -268,7 +268,7 @@ class Hand(composer.Entity):
         entry = get_hand(name)
         self._spec = entry.spec
         self._mjcf_root = mjcf.from_path(str(entry.xml_path))
-        self._mjcf_root.model = name
+        self._mjcf_root.model = "hand"  # names in the arena: hand/palm, hand/ff_pip, ...
         self._root_body = self._mjcf_root.find("body", self._spec.root_body)
         if self._root_body is None:
             raise ValueError(f"hand {name!r}: no body {self._spec.root_body!r}")
@@ -428,7 +428,7 @@ def build_scene(name: str, *, pos=(0.0, 0.0, 0.35), quat=None) -> tuple[Any, Moc
     handle.mocap_body.pos = root_pos
     handle.mocap_body.quat = root_quat
     # initial placement of the free hand at the mocap pose (qpos0), so nothing jumps at t=0
-    hand_frame = mjcf.get_attachment_frame(hand.mjcf_model)
+    hand_frame = mjcf.get_attachment_frame(hand.mjcf_model)  # the freejoint sits on it
     hand_frame.pos = root_pos
     hand_frame.quat = root_quat
     return root, handle
