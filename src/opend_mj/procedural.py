@@ -625,7 +625,10 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
                         handle_kind=kind, handle_orientation=orient)
             targets.append(tg)
             continue
-        # doors
+        # doors (with an inner shelf behind tall ones)
+        if cy1 - cy0 > 0.45 and rng.random() < 0.6:
+            ys = cy0 + float(rng.uniform(0.4, 0.6)) * (cy1 - cy0)
+            carcass.append(Visual("shelf", [Box((cx0, ys, zbi), (cx1, ys + t, zf - t_front - 0.02))], body))
         leaves: list[tuple[float, float, str]] = []
         if leaf.kind == "double_door":
             xm = (cx0 + cx1) / 2
