@@ -229,7 +229,8 @@ def _drawer_stack(rng: np.random.Generator, n: int) -> Split:
     return _rows(*[(w, Leaf("drawer")) for w in weights])
 
 
-def _size_for_rows(rng, cfg: GeneratorConfig, n_rows: int, row_h: tuple[float, float], extra: float):
+def _size_for_rows(rng: np.random.Generator, cfg: GeneratorConfig, n_rows: int, row_h: tuple[float, float],
+                   extra: float) -> float:
     """Cabinet height for ``n_rows`` rows of height in ``row_h`` plus ``extra`` (panels, plinth)."""
     lo = max(cfg.height_range[0], n_rows * row_h[0] + extra)
     hi = min(cfg.height_range[1], n_rows * row_h[1] + extra)
