@@ -14,7 +14,7 @@ import click
 #: command name -> "module:attribute" of a click command.
 COMMANDS: dict[str, str] = {
     "generate": "opend_mj.commands.assets:generate",
-    "build-assets": "opend_mj.commands.assets:build_assets",
+    "build-assets": "opend_mj.commands.dataset:build_assets",
     "render-hand": "opend_mj.commands.hands:render_hand",
 }
 

@@ -31,7 +31,7 @@ from opend_mj.meshes import DecompositionStats, Hull, collision_hulls, mass_prop
 from opend_mj.sources import CARCASS, CabinetSource, Part, SourceError, read_source, source_hash
 
 #: Bump when the compiler's output changes for the same input and config (invalidates the cache).
-COMPILER_VERSION = 1
+COMPILER_VERSION = 2
 CABINET_XML = "cabinet.xml"
 CABINET_JSON = "cabinet.json"
 

@@ -144,9 +144,18 @@ def _hull(points: np.ndarray) -> trimesh.Trimesh:
 
 def oriented_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Minimum-volume-ish oriented box: (centre, rotation columns = box axes, half sizes)."""
-    to_origin, extents = trimesh.bounds.oriented_bounds(points)
-    transform = np.linalg.inv(to_origin)
-    return transform[:3, 3].copy(), transform[:3, :3].copy(), np.asarray(extents) / 2.0
+    points = np.asarray(points, dtype=float)
+    try:
+        to_origin, extents = trimesh.bounds.oriented_bounds(points)
+        transform = np.linalg.inv(to_origin)
+        return transform[:3, 3].copy(), transform[:3, :3].copy(), np.asarray(extents) / 2.0
+    except Exception:  # degenerate sets (collinear, coplanar slivers): principal axes instead
+        mean = points.mean(axis=0)
+        _, _, vt = np.linalg.svd(points - mean, full_matrices=True)
+        rot = vt.T
+        local = (points - mean) @ rot
+        lo, hi = local.min(axis=0), local.max(axis=0)
+        return mean + rot @ ((lo + hi) / 2), rot, (hi - lo) / 2
 
 
 def is_convex_piece(vertices: np.ndarray, faces: np.ndarray, tolerance: float) -> bool:
@@ -260,27 +269,51 @@ def collision_hulls(
 ) -> list[Hull]:
     """Convex collision hulls for one merged mesh (a link's body or one handle)."""
     stats = stats if stats is not None else DecompositionStats()
-    vertices, faces = weld(vertices, faces)
     hulls: list[Hull] = []
     rest_v: list[np.ndarray] = []
     rest_f: list[np.ndarray] = []
     offset = 0
-    for pv, pf in pieces(vertices, faces):
+
+    def classify(pv: np.ndarray, pf: np.ndarray, allow_flat: bool = True) -> bool:
+        """Keep a piece as one hull if it is convex (or flat); return False if it is not."""
         size = float(np.linalg.norm(np.ptp(pv, axis=0)))
         if size < config.min_piece_size:
             stats.dropped_pieces += 1
-            continue
+            return True
         _, _, half = oriented_box(pv)
         flat = 2 * float(np.min(half)) < config.min_thickness
-        if flat or is_convex_piece(pv, pf, config.convex_tolerance):
-            hull = to_hull(pv, config)
-            if hull is not None:
-                hulls.append(hull)
-                stats.convex_pieces += 1
+        if flat and not allow_flat:
+            return False
+        if not (flat or is_convex_piece(pv, pf, config.convex_tolerance)):
+            return False
+        hull = to_hull(pv, config)
+        if hull is not None:
+            hulls.append(hull)
+            stats.convex_pieces += 1
+        return True
+
+    # Pass 1: pieces as the file connects them (procedural boxes, closed parts of real meshes).
+    # Pieces are welded only within themselves, so touching panels that share corner positions stay
+    # separate convex pieces.
+    pool_v: list[np.ndarray] = []
+    pool_f: list[np.ndarray] = []
+    pool_offset = 0
+    for raw_v, raw_f in pieces(vertices, faces):
+        pv, pf = weld(raw_v, raw_f)
+        if len(pf) >= 4 and classify(pv, pf, allow_flat=False):
             continue
-        rest_v.append(pv)
-        rest_f.append(pf + offset)
-        offset += len(pv)
+        pool_v.append(raw_v)
+        pool_f.append(raw_f + pool_offset)
+        pool_offset += len(raw_v)
+    # Pass 2: what is left (surface soups with split vertices) is welded as a whole and split again.
+    if pool_v:
+        wv, wf = weld(np.vstack(pool_v), np.vstack(pool_f))
+        for pv, pf in pieces(wv, wf):
+            if classify(pv, pf):
+                continue
+            rest_v.append(pv)
+            rest_f.append(pf + offset)
+            offset += len(pv)
     if rest_v:
         rv, rf = np.vstack(rest_v), np.vstack(rest_f)
         stats.decomposed_pieces += len(rest_v)
