@@ -1,0 +1,50 @@
+# opend-mj: every command a user or CI needs. `make quickstart` then `make test`.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+CABINETS ?= cabinets
+WORKERS  ?= $(shell nproc)
+export MUJOCO_GL ?= egl
+export PYTHONUNBUFFERED := 1
+
+.PHONY: quickstart install system-deps assets test bench bench-assets bench-hands clean
+
+## Set up from nothing and build the default (procedural) dataset.
+quickstart: install assets
+
+## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
+system-deps:
+	@if ldconfig -p | grep -q 'libEGL_mesa.so.0' && ldconfig -p | grep -q 'libOpenGL.so.0'; then \
+		echo "system-deps: EGL present"; \
+	else \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0; \
+	fi
+
+install: system-deps $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[test]'
+	touch $@
+
+## Compile the default dataset: 346 procedural sources -> cabinets/ + manifest.json.
+assets: install
+	$(BIN)/opend build-assets --out $(CABINETS) --workers $(WORKERS) --no-progress
+
+## The test suite (pytest's exit 5, "no tests collected", is a failure too).
+test: install
+	$(BIN)/python -m pytest -q; status=$$?; \
+	if [ $$status -eq 5 ]; then echo "no tests were collected"; fi; exit $$status
+
+bench: bench-assets bench-hands
+
+bench-assets: install
+	$(BIN)/python tools/bench_assets.py --out build/bench-cabinets
+
+bench-hands: install
+	$(BIN)/python tools/bench_hands.py
+
+clean:
+	rm -rf build $(CABINETS)/*/ $(CABINETS)/manifest.json
