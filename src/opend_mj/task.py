@@ -1,0 +1,281 @@
+"""The OpenD task as a dm_control composer Task: room, cabinet, hand on a mocap weld, RGB-D camera.
+
+One episode = one cabinet, one target (door or drawer) and its instruction, one hand, one seed. The
+action is the hand root's target pose (position, quaternion w-x-y-z) and the finger joint targets.
+The mocap body follows the root target at a bounded speed, interpolated over physics substeps, so
+the root never teleports. The success checker reads the target joint: open ratio above the
+threshold (20 % by default; drawer delta / drawer length, door angle / 180 degrees).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from dataclasses import dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from dm_control import composer  # noqa: E402
+from dm_control.composer.observation import observable  # noqa: E402
+from dm_env import specs  # noqa: E402
+
+from opend_mj.cabinet import Cabinet, Target  # noqa: E402
+from opend_mj.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
+from opend_mj.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
+from opend_mj.rooms import ROOM_NAMES, RoomArena  # noqa: E402
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Everything about the task that is not the episode itself."""
+
+    control_hz: float = 60.0
+    #: Physics step: 1/480 s, eight substeps per 60 Hz control step (about 2 ms, as DESIGN.md advises).
+    physics_timestep: float = 1.0 / 480.0
+    time_limit: float = 15.0
+    image_size: int = 256
+    camera_fovy: float = 45.0
+    camera_shift: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    light_scale: float = 1.0
+    success_threshold: float = 0.2
+    #: Another target "moved" if it opened by more than this fraction of its range.
+    moved_threshold: float = 0.01
+    max_root_speed: float = 0.75  # m/s
+    max_root_angular_speed: float = 4.0  # rad/s
+    #: Workspace box for root targets (world, metres) relative to the cabinet bounds.
+    workspace_margin: float = 1.5
+    enable_rgbd: bool = True
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """One episode of the benchmark."""
+
+    cabinet_dir: Path
+    target_joint: str
+    hand: str = "allegro"
+    seed: int = 0
+    room: int | None = None  # None: drawn from the seed
+    instruction: str | None = None  # None: the target's instruction from cabinet.json
+
+    def room_index(self) -> int:
+        if self.room is not None:
+            return int(self.room)
+        return int(np.random.default_rng([self.seed, 9]).integers(len(ROOM_NAMES)))
+
+
+@dataclass
+class Outcome:
+    """What the success checker reports about the current state."""
+
+    success: bool
+    open_ratio: float
+    range_ratio: float
+    joint_value: float
+    others_moved: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"success": self.success, "open_ratio": self.open_ratio, "range_ratio": self.range_ratio,
+                "joint_value": self.joint_value, "others_moved": self.others_moved}
+
+
+class SuccessChecker:
+    """The instructed target's open ratio against a threshold; which other targets moved."""
+
+    def __init__(self, cabinet: Cabinet, target: Target, threshold: float, moved_threshold: float):
+        self.cabinet = cabinet
+        self.target = target
+        self.threshold = threshold
+        self.moved_threshold = moved_threshold
+
+    def check_values(self, values: dict[str, float]) -> Outcome:
+        q = values[self.target.joint]
+        ratio = self.target.open_ratio(q)
+        others = [t.joint for t in self.cabinet.targets
+                  if t.joint != self.target.joint and t.range_ratio(values[t.joint]) > self.moved_threshold]
+        return Outcome(success=ratio > self.threshold, open_ratio=ratio, range_ratio=self.target.range_ratio(q),
+                       joint_value=q, others_moved=others)
+
+    def check(self, physics) -> Outcome:
+        return self.check_values(self.cabinet.joint_values(physics))
+
+
+class OpenCabinetTask(composer.Task):
+    """Open the door or drawer that the instruction names."""
+
+    def __init__(self, episode: EpisodeSpec, config: TaskConfig = TaskConfig()):
+        self.episode = episode
+        self.config = config
+        self._arena = RoomArena(room=episode.room_index(), seed=episode.seed, light_scale=config.light_scale)
+        self.cabinet = Cabinet(Path(episode.cabinet_dir))
+        self._arena.attach_cabinet(self.cabinet)
+        self.target = self.cabinet.target(episode.target_joint)
+        self.instruction = episode.instruction or self.target.instruction
+        self.hand = Hand(episode.hand)
+        self.mocap = attach_with_mocap(self._arena, self.hand)
+        lo, hi = self.cabinet.bounds
+        self.camera_pose = place_camera(lo, hi, fovy_deg=config.camera_fovy, shift=config.camera_shift)
+        self.camera = self._arena.add_camera(self.camera_pose, name="front")
+        self.checker = SuccessChecker(self.cabinet, self.target, config.success_threshold, config.moved_threshold)
+        self._n_fingers = len(self.hand.actuators)
+        self._workspace = (lo - config.workspace_margin, hi + config.workspace_margin)
+        self._root_target = None
+        self.start_pose = None
+        self.set_timesteps(control_timestep=1.0 / config.control_hz, physics_timestep=config.physics_timestep)
+        self._add_observables()
+
+    # ------------------------------------------------------------------ composition
+    @property
+    def root_entity(self):
+        return self._arena
+
+    @property
+    def arena(self) -> RoomArena:
+        return self._arena
+
+    def _add_observables(self) -> None:
+        size = self.config.image_size
+        obs = {}
+        if self.config.enable_rgbd:
+            obs["rgb"] = observable.MJCFCamera(self.camera, width=size, height=size)
+            obs["depth"] = observable.MJCFCamera(self.camera, width=size, height=size, depth=True)
+        obs["instruction"] = observable.Generic(lambda physics: np.array(self.instruction))
+        obs["hand_joint_pos"] = observable.MJCFFeature("qpos", self.hand.joints)
+        obs["root_pos"] = observable.MJCFFeature("xpos", self.hand.root_body)
+        obs["root_quat"] = observable.MJCFFeature("xquat", self.hand.root_body)
+        obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.checker.check(physics).open_ratio))
+        for name, o in obs.items():
+            o.enabled = True
+            self._task_observables[name] = o
+
+    @property
+    def task_observables(self):
+        return self._task_observables
+
+    def __getattr__(self, name):  # composer.Task has no _task_observables until first use
+        if name == "_task_observables":
+            self._task_observables = {}
+            return self._task_observables
+        raise AttributeError(name)
+
+    # ------------------------------------------------------------------ actions
+    def action_spec(self, physics):
+        ctrl = physics.bind(self.hand.actuators).ctrlrange
+        lo, hi = self._workspace
+        minimum = np.concatenate([lo, -np.ones(4), ctrl[:, 0]])
+        maximum = np.concatenate([hi, np.ones(4), ctrl[:, 1]])
+        names = ["root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz"] + [
+            a.name for a in self.hand.actuators]
+        return specs.BoundedArray(shape=minimum.shape, dtype=np.float64, minimum=minimum, maximum=maximum,
+                                  name="\t".join(names))
+
+    def make_action(self, root_pos, root_quat, fingers) -> np.ndarray:
+        return np.concatenate([np.asarray(root_pos, float), np.asarray(root_quat, float), np.asarray(fingers, float)])
+
+    def before_step(self, physics, action, random_state):
+        action = np.asarray(action, dtype=float)
+        if action.shape != (7 + self._n_fingers,):
+            raise ValueError(f"action has shape {action.shape}, expected ({7 + self._n_fingers},)")
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"action has non-finite values: {action}")
+        pos = np.clip(action[:3], *self._workspace)
+        quat = action[3:7]
+        norm = np.linalg.norm(quat)
+        if norm < 1e-6:
+            raise ValueError("action quaternion has zero norm")
+        self._root_target = (pos, quat / norm)
+        ctrl = physics.bind(self.hand.actuators).ctrlrange
+        physics.bind(self.hand.actuators).ctrl = np.clip(action[7:], ctrl[:, 0], ctrl[:, 1])
+
+    def before_substep(self, physics, action, random_state):
+        if self._root_target is None:
+            return
+        pos, quat = self.mocap.mocap_pose(physics)
+        dt = self.physics_timestep
+        target_pos, target_quat = self._root_target
+        delta = target_pos - pos
+        dist = np.linalg.norm(delta)
+        step = self.config.max_root_speed * dt
+        new_pos = target_pos if dist <= step else pos + delta * (step / dist)
+        new_quat = _slerp_toward(quat, target_quat, self.config.max_root_angular_speed * dt)
+        self.mocap.move(physics, new_pos, new_quat)
+
+    # ------------------------------------------------------------------ episode
+    def initialize_episode(self, physics, random_state):
+        self.cabinet.close_all(physics)
+        pos, quat = self.initial_root_pose(physics)
+        self.mocap.reset_pose(physics, pos, quat)
+        self.hand.set_finger_qpos(physics, self.hand.spec.open_pose)
+        self.hand.set_finger_targets(physics, self.hand.spec.open_pose)
+        self._root_target = (pos, quat)
+        self.start_pose = (pos.copy(), quat.copy())
+
+    def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
+        """Between camera and cabinet, beside the cabinet and out of the camera's view."""
+        lo, hi = self.cabinet.bounds
+        quat = orientation_for_handle("horizontal")
+        x = lo[0] - 0.35
+        z = float(np.clip((lo[2] + hi[2]) / 2, 0.3, 1.2))
+        view = camera_view(physics, self.camera.full_identifier, self.config.image_size, self.config.image_size)
+        y = hi[1] + 0.25
+        for _ in range(40):
+            u, _v = view.project(np.array([[x, y, z]]))[0]
+            if not np.isfinite(u) or u < -0.25 * self.config.image_size:
+                break
+            y += 0.05
+        return np.array([x, y, z]), np.asarray(quat, float)
+
+    def get_reward(self, physics) -> float:
+        return float(min(1.0, self.checker.check(physics).open_ratio / self.config.success_threshold))
+
+    def get_discount(self, physics) -> float:
+        return 1.0
+
+    def should_terminate_episode(self, physics) -> bool:
+        return False
+
+    # ------------------------------------------------------------------ for solvers and analysis
+    def outcome(self, physics) -> Outcome:
+        return self.checker.check(physics)
+
+    def camera_view(self, physics):
+        """Intrinsics and pose of the front camera (what every handle solver may use)."""
+        size = self.config.image_size
+        return camera_view(physics, self.camera.full_identifier, size, size)
+
+    def handle_corners(self, physics, target: Target | None = None) -> np.ndarray:
+        """World corners of the (current) handle geoms of a target: ground truth for the oracle."""
+        target = target or self.target
+        names = [f"cabinet/{g}" for g in target.handle_geoms]
+        return np.vstack([geom_box_corners(physics, n) for n in names])
+
+    def handle_boxes(self, physics) -> dict[str, tuple[float, float, float, float] | None]:
+        """Ground-truth image boxes (u0, v0, u1, v1) of every target's handle (oracle, training data)."""
+        from opend_mj.camera import box_in_image
+
+        view = self.camera_view(physics)
+        return {t.joint: box_in_image(self.handle_corners(physics, t), view) for t in self.cabinet.targets}
+
+
+def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.ndarray:
+    q = np.asarray(q, float) / np.linalg.norm(q)
+    target = np.asarray(target, float) / np.linalg.norm(target)
+    dot = float(np.dot(q, target))
+    if dot < 0:
+        target, dot = -target, -dot
+    angle = 2 * np.arccos(np.clip(dot, -1.0, 1.0))
+    if angle <= max_angle or angle < 1e-9:
+        return target
+    t = max_angle / angle
+    half = angle / 2
+    out = (np.sin((1 - t) * half) * q + np.sin(t * half) * target) / np.sin(half)
+    return out / np.linalg.norm(out)
+
+
+def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
+    """A dm_control composer Environment for one episode (time limit from the config)."""
+    task = OpenCabinetTask(episode, config)
+    return composer.Environment(task, time_limit=config.time_limit, random_state=episode.seed,
+                                strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False)
