@@ -16,6 +16,8 @@ COMMANDS: dict[str, str] = {
     "generate": "opend_mj.commands.assets:generate",
     "build-assets": "opend_mj.commands.dataset:build_assets",
     "render-hand": "opend_mj.commands.hands:render_hand",
+    "render": "opend_mj.commands.render:render",
+    "gallery": "opend_mj.commands.render:gallery",
 }
 
 

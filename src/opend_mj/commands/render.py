@@ -1,0 +1,66 @@
+"""`opend render` and `opend gallery`: PNG pictures of task scenes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+_cabinets_option = click.option(
+    "--cabinets", "cabinets", type=click.Path(file_okay=False, path_type=Path), default=Path("cabinets"),
+    show_default=True, help="Compiled dataset folder (with manifest.json).")
+
+
+@click.command("render")
+@_cabinets_option
+@click.option("--cabinet", "cabinet_id", required=True, help="Cabinet id (a folder under --cabinets).")
+@click.option("--target", default=None, help="Target joint (default: the cabinet's first target).")
+@click.option("--hand", default="allegro", show_default=True)
+@click.option("--room", type=click.IntRange(0, 8), default=None, help="Room preset 0-8 (default: from the seed).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--light-scale", type=click.FloatRange(min=0.0), default=1.0, show_default=True)
+@click.option("--size", type=click.IntRange(64, 480), default=384, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("scene.png"), show_default=True)
+def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, out):
+    """Render one episode's scene: the front camera (handle boxes drawn) beside an overview."""
+    from opend_mj.cabinet import CabinetError, load_cabinet_info
+    from opend_mj.render import render_episode_views, save_png
+    from opend_mj.task import EpisodeSpec, TaskConfig
+
+    try:
+        info = load_cabinet_info(cabinets / cabinet_id)
+    except CabinetError as exc:
+        raise click.UsageError(str(exc)) from exc
+    joints = [t["joint"] for t in info["targets"]]
+    if target is not None and target not in joints:
+        raise click.UsageError(f"cabinet {cabinet_id} has no target {target!r}; targets: {joints}")
+    episode = EpisodeSpec(cabinets / cabinet_id, target or joints[0], hand, seed=seed, room=room)
+    image = render_episode_views(episode, size=size, config=TaskConfig(light_scale=light_scale))
+    click.echo(str(save_png(image, out)))
+
+
+@click.command("gallery")
+@_cabinets_option
+@click.option("--count", type=click.IntRange(1, 12), default=3, show_default=True, help="Cabinets (rows).")
+@click.option("--rooms", default="0,3,6", show_default=True, help="Comma-separated room presets (columns).")
+@click.option("--hand", default="allegro", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("gallery.png"), show_default=True)
+def gallery(cabinets, count, rooms, hand, seed, out):
+    """A grid of cabinets (rows) x rooms (columns) into one PNG."""
+    from opend_mj.dataset import load_manifest
+    from opend_mj.render import render_gallery, save_png
+
+    try:
+        manifest = load_manifest(cabinets)
+    except FileNotFoundError as exc:
+        raise click.UsageError(str(exc)) from exc
+    try:
+        room_list = [int(r) for r in rooms.split(",") if r.strip()]
+    except ValueError as exc:
+        raise click.BadParameter(f"--rooms must be integers 0-8, got {rooms!r}") from exc
+    if not room_list or any(not 0 <= r <= 8 for r in room_list):
+        raise click.BadParameter(f"--rooms must be integers 0-8, got {rooms!r}")
+    ids = [c["id"] for c in manifest.cabinets][::max(1, len(manifest.cabinets) // count)][:count]
+    image = render_gallery(cabinets, ids, room_list, hand=hand, seed=seed)
+    click.echo(str(save_png(image, out)))
