@@ -1,0 +1,162 @@
+"""The dm_control task: scenes in every room, success checker, determinism, headless RGB-D, actions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from opend_mj.rooms import ROOM_NAMES
+from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+
+
+def _cabinet_with(proc_cabinets, kind):
+    for c in proc_cabinets:
+        for t in c.info["targets"]:
+            if t["type"] == kind:
+                return c, t
+    pytest.skip(f"no {kind} among the sampled cabinets")
+
+
+@pytest.fixture(scope="module")
+def drawer_case(proc_cabinets):
+    return _cabinet_with(proc_cabinets, "drawer")
+
+
+@pytest.fixture(scope="module")
+def door_case(proc_cabinets):
+    return _cabinet_with(proc_cabinets, "door")
+
+
+def _hold(env, steps):
+    """Keep the hand at its start pose with open fingers for `steps` control steps."""
+    task = env.task
+    action = task.make_action(*task.start_pose, task.hand.spec.open_pose)
+    for _ in range(steps):
+        env.step(action)
+
+
+@pytest.mark.parametrize("room", range(len(ROOM_NAMES)))
+def test_every_room_renders_and_cabinet_stays_shut_10s(room, door_case, drawer_case):
+    cabinet, target = (door_case, drawer_case)[room % 2]
+    env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=room, room=room),
+                           TaskConfig(enable_rgbd=room == 0))
+    try:
+        ts = env.reset()
+        if room == 0:
+            rgb, depth = ts.observation["rgb"], ts.observation["depth"]
+            assert rgb.shape == (256, 256, 3) and rgb.dtype == np.uint8 and rgb.std() > 5
+            assert depth.shape[:2] == (256, 256) and np.isfinite(depth).all() and 0.1 < depth.min() < 5
+        before = env.task.cabinet.joint_values(env.physics)
+        _hold(env, int(10 * env.task.config.control_hz))
+        after = env.task.cabinet.joint_values(env.physics)
+        assert env.physics.data.time == pytest.approx(10.0, abs=0.02)
+        for t in env.task.cabinet.targets:
+            moved = abs(after[t.joint] - before[t.joint]) / (t.upper - t.lower)
+            assert moved < 0.01, f"{t.joint} self-opened by {moved:.1%} of its range in room {room}"
+        assert np.abs(env.physics.bind(env.task.cabinet.mjcf_model.find_all("joint")).qvel).max() < 1e-3
+    finally:
+        env.close()
+
+
+def test_success_checker_scripted_values(drawer_case, door_case):
+    for cabinet, target in (drawer_case, door_case):
+        env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "franka", seed=0),
+                               TaskConfig(enable_rgbd=False))
+        try:
+            env.reset()
+            task, physics = env.task, env.physics
+            checker = task.checker
+            closed = {t.joint: t.closed for t in task.cabinet.targets}
+            out = checker.check_values(closed)
+            assert not out.success and out.open_ratio == 0 and out.others_moved == []
+            tgt = task.target
+            if tgt.kind == "drawer":
+                q_open = tgt.closed + tgt.open_sign * 0.25 * tgt.drawer_length
+                q_small = tgt.closed + tgt.open_sign * 0.15 * tgt.drawer_length
+                assert checker.check_values({**closed, tgt.joint: q_open}).open_ratio == pytest.approx(0.25)
+            else:
+                q_open = tgt.closed + tgt.open_sign * np.deg2rad(45)  # 45 / 180 = 25 %
+                q_small = tgt.closed + tgt.open_sign * np.deg2rad(30)
+            assert checker.check_values({**closed, tgt.joint: q_open}).success
+            assert not checker.check_values({**closed, tgt.joint: q_small}).success
+            # The checker reads the simulator: set the joint in physics, as a scripted opening would.
+            physics.bind(task.cabinet.joint_element(tgt.joint)).qpos = q_open
+            physics.forward()
+            outcome = task.outcome(physics)
+            assert outcome.success and outcome.joint_value == pytest.approx(q_open)
+            # Wrong target: another door/drawer opened, the instructed one closed -> failure, recorded.
+            others = [t for t in task.cabinet.targets if t.joint != tgt.joint]
+            if others:
+                o = others[0]
+                wrong = {**closed, o.joint: o.closed + o.open_sign * 0.9 * o.open_travel}
+                result = checker.check_values(wrong)
+                assert not result.success and result.others_moved == [o.joint]
+        finally:
+            env.close()
+
+
+def test_same_seed_same_first_image_and_instruction(door_case):
+    cabinet, target = door_case
+    images = []
+    for seed in (5, 5, 6):
+        env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "shadow", seed=seed))
+        try:
+            ts = env.reset()
+            images.append((ts.observation["rgb"].copy(), str(ts.observation["instruction"])))
+        finally:
+            env.close()
+    assert np.array_equal(images[0][0], images[1][0]) and images[0][1] == images[1][1] == target["instruction"]
+    assert not np.array_equal(images[0][0], images[2][0])
+
+
+def test_oracle_boxes_lie_on_the_handles(door_case):
+    cabinet, target = door_case
+    env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=1))
+    try:
+        ts = env.reset()
+        boxes = env.task.handle_boxes(env.physics)
+        depth = ts.observation["depth"].squeeze()
+        view = env.task.camera_view(env.physics)
+        for t in env.task.cabinet.targets:
+            u0, v0, u1, v1 = boxes[t.joint]
+            assert 0 <= u0 < u1 <= 256 and 0 <= v0 < v1 <= 256
+            u, v = (u0 + u1) / 2, (v0 + v1) / 2
+            point = view.backproject(u, v, depth[int(v), int(u)])
+            lo, hi = t.handle_box
+            assert np.all(point > lo - 0.03) and np.all(point < hi + 0.03), (t.joint, point, lo, hi)
+    finally:
+        env.close()
+
+
+def test_root_moves_only_at_bounded_speed_and_bad_actions_raise(drawer_case):
+    cabinet, target = drawer_case
+    config = TaskConfig(enable_rgbd=False)
+    env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0), config)
+    try:
+        env.reset()
+        task = env.task
+        pos0, quat0 = task.start_pose
+        far = pos0 + np.array([0.0, -1.0, 0.0])
+        env.step(task.make_action(far, quat0, task.hand.spec.open_pose))
+        mocap_pos, _ = task.mocap.mocap_pose(env.physics)
+        assert np.linalg.norm(mocap_pos - pos0) <= config.max_root_speed / config.control_hz + 1e-9
+        for bad in (np.nan, np.inf):
+            action = task.make_action(far, quat0, task.hand.spec.open_pose)
+            action[0] = bad
+            with pytest.raises(ValueError, match="non-finite"):
+                env.step(action)
+    finally:
+        env.close()
+
+
+def test_low_light_is_darker(door_case):
+    cabinet, target = door_case
+    means = []
+    for scale in (1.0, 0.7):
+        env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=2, room=1),
+                               TaskConfig(light_scale=scale))
+        try:
+            means.append(env.reset().observation["rgb"].mean())
+        finally:
+            env.close()
+    assert means[1] < 0.92 * means[0]
