@@ -122,8 +122,10 @@ class OpenCabinetTask(composer.Task):
         self._n_fingers = len(self.hand.actuators)
         self._workspace = (lo - config.workspace_margin, hi + config.workspace_margin)
         self._root_target = None
+        self._path_pos = None
         self.start_pose = None
         self.set_timesteps(control_timestep=1.0 / config.control_hz, physics_timestep=config.physics_timestep)
+        self._substeps = int(round(1.0 / config.control_hz / config.physics_timestep))
         self._add_observables()
 
     # ------------------------------------------------------------------ composition
@@ -146,8 +148,10 @@ class OpenCabinetTask(composer.Task):
         obs["root_pos"] = observable.MJCFFeature("xpos", self.hand.root_body)
         obs["root_quat"] = observable.MJCFFeature("xquat", self.hand.root_body)
         obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.checker.check(physics).open_ratio))
+        substeps = int(round(1.0 / self.config.control_hz / self.config.physics_timestep))
         for name, o in obs.items():
             o.enabled = True
+            o.update_interval = substeps  # observed once per control step, not every substep
             self._task_observables[name] = o
 
     @property
@@ -180,27 +184,42 @@ class OpenCabinetTask(composer.Task):
             raise ValueError(f"action has shape {action.shape}, expected ({7 + self._n_fingers},)")
         if not np.all(np.isfinite(action)):
             raise ValueError(f"action has non-finite values: {action}")
-        pos = np.clip(action[:3], *self._workspace)
         quat = action[3:7]
         norm = np.linalg.norm(quat)
         if norm < 1e-6:
             raise ValueError("action quaternion has zero norm")
-        self._root_target = (pos, quat / norm)
-        ctrl = physics.bind(self.hand.actuators).ctrlrange
-        physics.bind(self.hand.actuators).ctrl = np.clip(action[7:], ctrl[:, 0], ctrl[:, 1])
+        self._root_target = (np.clip(action[:3], *self._workspace), quat / norm)
+        self._plan_mocap_path(physics)
+        lo, hi = self._ctrl_range
+        physics.data.ctrl[self._ctrl_index] = np.clip(action[7:], lo, hi)
+
+    def _plan_mocap_path(self, physics) -> None:
+        """Mocap poses for each substep of this control step: toward the target at bounded speed."""
+        data = physics.data
+        pos, quat = data.mocap_pos[self._mocap_id].copy(), data.mocap_quat[self._mocap_id].copy()
+        target_pos, target_quat = self._root_target
+        n = self._substeps
+        dt = self.config.physics_timestep
+        delta = target_pos - pos
+        dist = float(np.linalg.norm(delta))
+        travel = min(dist, self.config.max_root_speed * dt * n)
+        k = np.arange(1, n + 1)[:, None]
+        step = np.minimum(k * self.config.max_root_speed * dt, travel)
+        self._path_pos = pos + (delta / dist if dist > 1e-12 else 0.0) * step
+        if abs(float(np.dot(quat, target_quat))) > 1.0 - 1e-12:  # no rotation: the common case
+            self._path_quat = [target_quat] * n
+        else:
+            self._path_quat = [_slerp_toward(quat, target_quat, self.config.max_root_angular_speed * dt * (i + 1))
+                               for i in range(n)]
+        self._substep = 0
 
     def before_substep(self, physics, action, random_state):
-        if self._root_target is None:
+        if self._path_pos is None:
             return
-        pos, quat = self.mocap.mocap_pose(physics)
-        dt = self.physics_timestep
-        target_pos, target_quat = self._root_target
-        delta = target_pos - pos
-        dist = np.linalg.norm(delta)
-        step = self.config.max_root_speed * dt
-        new_pos = target_pos if dist <= step else pos + delta * (step / dist)
-        new_quat = _slerp_toward(quat, target_quat, self.config.max_root_angular_speed * dt)
-        self.mocap.move(physics, new_pos, new_quat)
+        i = min(self._substep, len(self._path_pos) - 1)
+        physics.data.mocap_pos[self._mocap_id] = self._path_pos[i]
+        physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
+        self._substep += 1
 
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
@@ -210,7 +229,13 @@ class OpenCabinetTask(composer.Task):
         self.hand.set_finger_qpos(physics, self.hand.spec.open_pose)
         self.hand.set_finger_targets(physics, self.hand.spec.open_pose)
         self._root_target = (pos, quat)
+        self._path_pos = None
         self.start_pose = (pos.copy(), quat.copy())
+        self._mocap_id = self.mocap.mocap_id(physics)
+        self._ctrl_index = np.array([physics.model.name2id(a.full_identifier, "actuator")
+                                     for a in self.hand.actuators])
+        ranges = physics.model.actuator_ctrlrange[self._ctrl_index]
+        self._ctrl_range = (ranges[:, 0], ranges[:, 1])
 
     def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
