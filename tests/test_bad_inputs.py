@@ -1,0 +1,147 @@
+"""Broken sources: each is rejected with the right reason and a message naming the file and the problem,
+and a dataset build over good and broken sources builds the good ones and records the broken ones."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+from opend_mj.compiler import compile_cabinet
+from opend_mj.dataset import build_dataset
+from opend_mj.procedural import generate_source
+
+#: proc_0013 of seed 0 is a single door (revolute joint), proc_0001 a single drawer; both describable.
+DOOR_INDEX, DRAWER_INDEX = 13, 1
+
+
+def _obj(source: Path, k: int) -> Path:
+    return source / "textured_objs" / f"original-{k}.obj"
+
+
+def _urdf(source: Path) -> Path:
+    return source / "mobility.urdf"
+
+
+def missing_mesh(src: Path) -> Path:
+    _obj(src, 1).unlink()
+    return _obj(src, 1)
+
+
+def malformed_urdf(src: Path) -> Path:
+    text = _urdf(src).read_text()
+    _urdf(src).write_text(text[: len(text) // 2])
+    return _urdf(src)
+
+
+def revolute_without_limit(src: Path) -> Path:
+    text = _urdf(src).read_text()
+    assert 'type="revolute"' in text
+    _urdf(src).write_text(re.sub(r"\s*<limit [^>]*/>", "", text))
+    return _urdf(src)
+
+
+def empty_obj(src: Path) -> Path:
+    _obj(src, 0).write_text("")
+    return _obj(src, 0)
+
+
+def degenerate_obj(src: Path) -> Path:
+    # Faces whose corners are collinear or repeated: zero area everywhere.
+    _obj(src, 0).write_text("v 0 0 0\nv 0.1 0 0\nv 0.2 0 0\nv 0.3 0 0\nf 1 2 3\nf 2 3 4\nf 1 1 2\n")
+    return _obj(src, 0)
+
+
+def nan_vertices(src: Path) -> Path:
+    path = _obj(src, 0)
+    lines = path.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("v "))
+    lines[first] = "v nan 0.1 nan"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def no_urdf(src: Path) -> Path:
+    _urdf(src).unlink()
+    return _urdf(src)
+
+
+def unknown_link(src: Path) -> Path:
+    text = _urdf(src).read_text()
+    _urdf(src).write_text(text.replace('<child link="link_0"/>', '<child link="link_42"/>', 1))
+    return _urdf(src)
+
+
+def garbage_mesh(src: Path) -> Path:
+    _obj(src, 0).write_bytes(b"\x00\x01\x02 not a mesh \xff\xfe" * 50)
+    return _obj(src, 0)
+
+
+#: name -> (break it, expected reason, words the message must contain)
+CASES: dict[str, tuple[Callable[[Path], Path], str, str]] = {
+    "missing_mesh": (missing_mesh, "mesh_error", r"missing"),
+    "malformed_urdf": (malformed_urdf, "urdf_error", r"malformed"),
+    "revolute_without_limit": (revolute_without_limit, "urdf_error", r"joint_0.*(no limit|limit)"),
+    "empty_obj": (empty_obj, "mesh_error", r"empty"),
+    "degenerate_obj": (degenerate_obj, "mesh_error", r"degenerate|zero area"),
+    "nan_vertices": (nan_vertices, "mesh_error", r"NaN"),
+    "no_urdf": (no_urdf, "urdf_error", r"no mobility\.urdf"),
+    "unknown_link": (unknown_link, "urdf_error", r"unknown link|link_42"),
+    "garbage_mesh": (garbage_mesh, "mesh_error", r"mesh"),
+}
+
+
+@pytest.fixture(scope="module")
+def good_sources(tmp_path_factory) -> list[Path]:
+    root = tmp_path_factory.mktemp("good")
+    return [generate_source(DOOR_INDEX, 0, root), generate_source(DRAWER_INDEX, 0, root)]
+
+
+def _broken(good: Path, root: Path, name: str) -> tuple[Path, Path]:
+    src = Path(shutil.copytree(good, root / name))
+    return src, CASES[name][0](src)
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_broken_source_is_rejected(name, good_sources, tmp_path):
+    src, broken_file = _broken(good_sources[0], tmp_path / "src", name)
+    _, reason, problem = CASES[name]
+    result = compile_cabinet(src, tmp_path / "out", cache_dir=tmp_path / "cache")
+    assert result.status == "rejected"
+    assert result.reason == reason, result.message
+    assert str(broken_file) in result.message, f"the message names the file: {result.message}"
+    assert re.search(problem, result.message, re.IGNORECASE), result.message
+    assert not (tmp_path / "out" / name).exists(), "a rejected source leaves no half-built cabinet"
+
+
+def test_rejection_replaces_a_stale_build(good_sources, tmp_path):
+    """A source that built before and is broken now is rejected, and its old output is removed."""
+    src = Path(shutil.copytree(good_sources[0], tmp_path / "src" / "cab"))
+    out = tmp_path / "out"
+    assert compile_cabinet(src, out).status == "built"
+    empty_obj(src)
+    result = compile_cabinet(src, out)
+    assert (result.status, result.reason) == ("rejected", "mesh_error")
+    assert not (out / "cab").exists()
+
+
+def test_good_sources_compile(good_sources, tmp_path):
+    for src in good_sources:
+        assert compile_cabinet(src, tmp_path / "out").status == "built"
+
+
+def test_dataset_over_good_and_broken_sources(good_sources, tmp_path):
+    broken_root = tmp_path / "broken"
+    broken = [_broken(good_sources[0], broken_root, name)[0] for name in sorted(CASES)]
+    sources = [good_sources[0], *broken, good_sources[1]]
+    manifest = build_dataset(sources, tmp_path / "out", workers=2, progress=False, log=lambda *a: None)
+    assert sorted(c["id"] for c in manifest.cabinets) == sorted(s.name for s in good_sources)
+    rejected = {r["id"]: r for r in manifest.rejected}
+    assert sorted(rejected) == sorted(CASES)
+    for name, (_, reason, problem) in CASES.items():
+        assert rejected[name]["reason"] == reason, rejected[name]
+        assert re.search(problem, rejected[name]["message"], re.IGNORECASE)
+    assert (tmp_path / "out" / "manifest.json").is_file()
