@@ -160,3 +160,18 @@ def test_low_light_is_darker(door_case):
         finally:
             env.close()
     assert means[1] < 0.92 * means[0]
+
+
+def test_gymnasium_wrapper(drawer_case):
+    from opend_mj.gym_env import OpenDGymEnv
+
+    cabinet, target = drawer_case
+    env = OpenDGymEnv(EpisodeSpec(cabinet.dir, target["joint"], "franka", seed=0))
+    try:
+        obs, info = env.reset(seed=3)
+        assert env.observation_space.contains(obs)
+        assert info["instruction"] == target["instruction"] and info["outcome"]["open_ratio"] == 0.0
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert obs["rgb"].shape == (256, 256, 3) and not terminated and reward == 0.0
+    finally:
+        env.close()
