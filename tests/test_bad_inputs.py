@@ -145,3 +145,35 @@ def test_dataset_over_good_and_broken_sources(good_sources, tmp_path):
         assert rejected[name]["reason"] == reason, rejected[name]
         assert re.search(problem, rejected[name]["message"], re.IGNORECASE)
     assert (tmp_path / "out" / "manifest.json").is_file()
+
+
+def tiny_handle(src: Path) -> Path:
+    """The handle mesh is a single 1 mm triangle: too small to carry collision geometry."""
+    _obj(src, 1).write_text("v 0 0 0\nv 0.001 0 0\nv 0 0.001 0\nf 1 2 3\n")
+    return _obj(src, 1)
+
+
+def test_handle_too_small_to_grasp_is_rejected(good_sources, tmp_path):
+    src, _ = Path(shutil.copytree(good_sources[0], tmp_path / "src" / "cab")), None
+    tiny_handle(src)
+    result = compile_cabinet(src, tmp_path / "out")
+    assert (result.status, result.reason) == ("rejected", "mesh_error"), result.message
+    assert "handle of link_0" in result.message and "no collision geometry" in result.message
+
+
+def test_lone_triangle_visual_is_fine(good_sources, tmp_path):
+    """A visual piece made of one triangle with a material of its own (PartNet has such decals) builds."""
+    import mujoco
+
+    src = Path(shutil.copytree(good_sources[0], tmp_path / "src" / "cab"))
+    objs = src / "textured_objs"
+    (objs / "decal.mtl").write_text("newmtl decal\nKd 0.9 0.1 0.1\n")
+    (objs / "decal.obj").write_text("mtllib decal.mtl\nusemtl decal\nv 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nf 1 2 3\n")
+    text = _urdf(src).read_text()
+    carcass = re.search(r'<child link="(link_\d+)"/>\s*<parent link="base"/>', text).group(1)
+    visual = ('<link name="%s">\n\t\t<visual name="decal">\n\t\t\t<geometry>\n'
+              '\t\t\t\t<mesh filename="textured_objs/decal.obj"/>\n\t\t\t</geometry>\n\t\t</visual>\n' % carcass)
+    _urdf(src).write_text(text.replace(f'<link name="{carcass}">\n', visual, 1))
+    result = compile_cabinet(src, tmp_path / "out")
+    assert result.status == "built", result.message
+    mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "cab" / "cabinet.xml"))

@@ -280,6 +280,8 @@ class _MjcfWriter:
                 else:
                     lines += [f"f {a} {b} {c}" for a, b, c in (v.faces + offset + 1)]
                 offset += len(local)
+            if offset < 4:  # MuJoCo rejects meshes of fewer than 4 vertices: a lone triangle is not drawn
+                continue
             (self.out_dir / "meshes" / f"{name}.obj").write_text("\n".join(lines) + "\n")
             ET.SubElement(self.asset, "mesh", name=name, file=f"meshes/{name}.obj", inertia="shell")
             attrs = {"name": name, "class": "visual", "type": "mesh", "mesh": name}
@@ -385,6 +387,9 @@ def compile_cabinet(
 
     for r in records:
         r["handle"]["geoms"] = writer.handle_geoms.get(r["link"], [])
+        if not r["handle"]["geoms"]:  # every handle piece was too small to collide: nothing to grasp
+            return rejected("mesh_error", f"{source_dir}: the handle of {r['link']} ({r['joint']}) has no "
+                                          f"collision geometry (pieces under {config.min_piece_size} m)")
     lo, hi = source.bounds
     info = {
         "id": cabinet_id,
