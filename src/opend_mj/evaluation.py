@@ -1,0 +1,408 @@
+"""Episode runner, parallel pool and the resumable results file (`opend run`).
+
+One episode = (cabinet, target joint, hand, solver, seed, light scale, pull strategy). The runner
+builds the task, renders the one front RGB-D image, runs the planner and records a JSON line.
+Ground truth is used here only to label results (failure stage, success); the planner never sees it
+(except through the ``oracle`` solver, whose whole point is to hand it the true box).
+
+Results file: one JSON object per line, written by the parent process only, one ``write()`` of a
+full line, then flush and ``os.fsync``. On load, a torn last line (no newline, or not JSON) is
+dropped and truncated away, so after ``kill -9`` a rerun neither loses nor repeats an episode.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Iterable
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+KEY_FIELDS = ("cabinet", "joint", "hand", "solver", "seed", "light_scale", "pull")
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    cabinet: str
+    cabinet_dir: str
+    joint: str
+    split: str
+    hand: str
+    solver: str
+    seed: int = 0
+    light_scale: float = 1.0
+    pull: str = "arc"
+    video_dir: str | None = None
+    room: int | None = None
+    planner_overrides: tuple = ()  # ((field, value), ...) for grasp search / experiments
+    use_grasp_file: bool = True
+
+    def key(self) -> tuple:
+        return episode_key(asdict(self))
+
+
+def episode_key(record: dict) -> tuple:
+    return (str(record["cabinet"]), str(record["joint"]), str(record["hand"]), str(record["solver"]),
+            int(record["seed"]), round(float(record.get("light_scale", 1.0)), 6), str(record.get("pull", "arc")))
+
+
+# --------------------------------------------------------------------------------------------------
+# Results file
+# --------------------------------------------------------------------------------------------------
+def load_results(path: Path, repair: bool = True) -> list[dict]:
+    """All complete records of a results file; a torn last line is dropped (and truncated away)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    data = path.read_bytes()
+    records: list[dict] = []
+    good_end = 0
+    pos = 0
+    while pos < len(data):
+        nl = data.find(b"\n", pos)
+        if nl < 0:  # last line without newline: torn
+            break
+        line = data[pos:nl]
+        pos = nl + 1
+        if line.strip():
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError:
+                if pos >= len(data):  # a torn last line that happens to end in a newline
+                    break
+                raise ValueError(f"{path}: corrupt line in the middle of the file at byte {pos}")
+        good_end = pos
+    if repair and good_end < len(data):
+        with open(path, "r+b") as f:
+            f.truncate(good_end)
+            f.flush()
+            os.fsync(f.fileno())
+    return records
+
+
+class ResultsWriter:
+    """Appends one record per line: one write of the full line, flush, fsync (parent process only)."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+
+    def write(self, record: dict) -> None:
+        line = (json.dumps(record, default=_json_default) + "\n").encode()
+        n = os.write(self._fd, line)
+        if n != len(line):
+            raise OSError(f"short write to {self.path}")
+        os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+# --------------------------------------------------------------------------------------------------
+# Jobs
+# --------------------------------------------------------------------------------------------------
+def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str = "test", seed: int = 0,
+              light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
+              video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None) -> list[EpisodeJob]:
+    from opend_mj.dataset import load_manifest
+
+    cabinets_dir = Path(cabinets_dir)
+    manifest = load_manifest(cabinets_dir)
+    pairs = manifest.targets(split)
+    if cabinet_ids is not None:
+        ids = set(cabinet_ids)
+        pairs = [(c, t) for c, t in pairs if c["id"] in ids]
+    if limit is not None:
+        pairs = pairs[:limit]
+    jobs = []
+    for hand in hands:
+        for cab, tgt in pairs:
+            cab_dir = cabinets_dir / cab.get("path", cab["id"]) if not Path(cab.get("path", "")).is_absolute() \
+                else Path(cab["path"])
+            if not (cab_dir / "cabinet.json").is_file():
+                cab_dir = cabinets_dir / cab["id"]
+            jobs.append(EpisodeJob(cabinet=cab["id"], cabinet_dir=str(cab_dir), joint=tgt["joint"],
+                                   split=cab["split"], hand=hand, solver=solver, seed=seed,
+                                   light_scale=light_scale, pull=pull,
+                                   video_dir=str(video_dir) if video_dir else None))
+    return jobs
+
+
+# --------------------------------------------------------------------------------------------------
+# One episode
+# --------------------------------------------------------------------------------------------------
+def _box_contains(box, u, v, pad=3.0) -> bool:
+    return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
+
+
+def run_episode(job: EpisodeJob) -> dict:
+    """Run one episode; returns its record (never raises: errors become an ``error`` record)."""
+    t0 = time.perf_counter()
+    base = {**{k: getattr(job, k) for k in ("cabinet", "joint", "hand", "solver", "split", "seed",
+                                            "light_scale", "pull")}}
+    try:
+        record = _run_episode(job)
+    except Exception:  # noqa: BLE001 (an episode's failure must not stop the run)
+        record = {"error": traceback.format_exc(), "success": False}
+    out = {**base, **record}
+    out["wall_seconds"] = round(time.perf_counter() - t0, 3)
+    return out
+
+
+def _run_episode(job: EpisodeJob) -> dict:
+    from opend_mj.camera import RGBDCamera
+    from opend_mj.hands import load_spec
+    from opend_mj.planner import GraspProfile, Observation, Planner, PlannerConfig, Robot
+    from opend_mj.solvers import get_solver, needs_ground_truth
+    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+
+    spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
+                          seed=job.seed, room=job.room)
+    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
+    env = make_environment(spec_ep, config)
+    task = env.task
+    env.reset()
+    physics = env.physics
+    target = task.target
+    instruction = task.instruction
+
+    # the one observation
+    cam = RGBDCamera(physics, "front", config.image_size, config.image_size)
+    try:
+        rgb, depth = cam.render()
+    finally:
+        cam.close()
+    view = task.camera_view(physics)
+    gt_box = task.handle_boxes(physics)[target.joint]
+
+    options = {}
+    if needs_ground_truth(job.solver):
+        options["ground_truth"] = lambda: task.handle_boxes(physics)[target.joint]
+    solver = get_solver(job.solver, **options)
+
+    # ground-truth probes for labelling only
+    probes: dict = {}
+
+    def true_handle_box():
+        corners = task.handle_corners(physics)
+        return corners.min(axis=0), corners.max(axis=0)
+
+    def on_stage(name, info):
+        if name == "grasp":
+            lo, hi = true_handle_box()
+            site = physics.bind(task.hand.grasp_site).xpos.copy()
+            outside = np.maximum(0.0, np.maximum(lo - site, site - hi))
+            probes["site_to_handle"] = float(np.linalg.norm(outside))
+            probes["t_grasp"] = float(physics.data.time)
+        elif name == "pull":
+            probes["q_pull_start"] = task.outcome(physics).range_ratio
+            probes["t_pull"] = float(physics.data.time)
+
+    video = _VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
+    robot = Robot(env, on_step=video.capture if video else None)
+    overrides = dict(job.planner_overrides)
+    pconfig = replace(PlannerConfig(pull=job.pull))
+    grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
+    if grasp is not None:
+        pconfig = grasp.apply(pconfig)
+    if overrides:
+        pconfig = replace(pconfig, **overrides)
+        grasp = None if "close_scale" in overrides or "grasp_depth" in overrides else grasp
+    planner = Planner(solver, load_spec(job.hand), pconfig, grasp=None, on_stage=on_stage)
+    if grasp is not None:
+        planner.grasp = grasp  # knob orientation
+    try:
+        plan = planner.run(robot, Observation(rgb=rgb, depth=depth, instruction=instruction, camera_view=view))
+    finally:
+        if video:
+            video.close()
+    outcome = task.outcome(physics)
+
+    # failure stage (ground truth, for the tables)
+    failed = None
+    if not outcome.success:
+        box = plan.box["box"] if plan.box else None
+        if box is None or gt_box is None or not _box_contains(gt_box, (box[0] + box[2]) / 2, (box[1] + box[3]) / 2):
+            failed = "locate"
+        elif probes.get("site_to_handle", 1.0) > 0.02:
+            failed = "approach"
+        elif outcome.range_ratio < 0.03:
+            failed = "grasp"
+        else:
+            failed = "pull"
+    return {
+        "cabinet_dir": job.cabinet_dir,
+        "target_type": target.kind,
+        "instruction": instruction,
+        "room": task.episode.room_index(),
+        "success": bool(outcome.success),
+        "open_ratio": float(outcome.open_ratio),
+        "range_ratio": float(outcome.range_ratio),
+        "joint_value": float(outcome.joint_value),
+        "others_moved": list(outcome.others_moved),
+        "failed_stage": failed,
+        "planner_failed_stage": plan.failed_stage,
+        "handle_kind": plan.handle["kind"] if plan.handle else None,
+        "handle_orientation": plan.handle["orientation"] if plan.handle else None,
+        "box": plan.box["box"] if plan.box else None,
+        "gt_box": [round(x, 2) for x in gt_box] if gt_box else None,
+        "site_to_handle": round(probes.get("site_to_handle", float("nan")), 4),
+        "pulled": round(plan.pulled, 4),
+        "turned_deg": round(plan.turned_deg, 2),
+        "sim_seconds": round(float(physics.data.time), 3),
+        "video": str(video.path) if video else None,
+    }
+
+
+class _VideoRecorder:
+    """Front camera and a side view side by side, every few control steps, written as MP4."""
+
+    def __init__(self, job: EpisodeJob, physics, config, bounds, every: int = 2, size: int = 256):
+        import mujoco
+
+        self.physics = physics
+        self.every = every
+        self.frames: list[np.ndarray] = []
+        self.n = 0
+        name = f"{job.cabinet}_{job.joint}_{job.hand}_{job.solver}_s{job.seed}_l{job.light_scale:g}_{job.pull}.mp4"
+        self.path = Path(job.video_dir) / name
+        self.fps = int(round(config.control_hz / every))
+        m, d = physics.model.ptr, physics.data.ptr
+        self._m, self._d = m, d
+        self._renderer = mujoco.Renderer(m, height=size, width=size)
+        self._front = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "front")
+        if self._front < 0:
+            self._front = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "front/front")
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        # look at the cabinet from its front-right side
+        lo, hi = (np.asarray(b, float) for b in bounds)
+        cam.lookat[:] = [lo[0] - 0.2, 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])]
+        cam.distance = float(1.2 + 1.0 * max(hi[1] - lo[1], hi[2] - lo[2]))
+        cam.azimuth = 25.0
+        cam.elevation = -50.0
+        self._side = cam
+        self.capture(force=True)
+
+    def capture(self, force: bool = False) -> None:
+        self.n += 1
+        if not force and self.n % self.every:
+            return
+        r = self._renderer
+        cams = []
+        if self._front >= 0:
+            r.update_scene(self._d, camera=self._front)
+            cams.append(r.render().copy())
+        r.update_scene(self._d, camera=self._side)
+        cams.append(r.render().copy())
+        self.frames.append(np.concatenate(cams, axis=1))
+
+    def close(self) -> None:
+        import imageio.v2 as imageio
+
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self.frames:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            imageio.mimwrite(str(self.path), self.frames, fps=self.fps, codec="libx264", macro_block_size=1)
+            self.frames = []
+
+
+# --------------------------------------------------------------------------------------------------
+# The pool
+# --------------------------------------------------------------------------------------------------
+def _worker_init() -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        os.nice(5)
+    except OSError:
+        pass
+
+
+def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool = True) -> dict:
+    """Run the jobs not yet in ``out`` (resumable) and append their records. Returns counts."""
+    from tqdm import tqdm
+
+    out = Path(out)
+    done = {episode_key(r) for r in load_results(out)}
+    seen = set()
+    todo = []
+    for j in jobs:
+        k = j.key()
+        if k in done or k in seen:
+            continue
+        seen.add(k)
+        todo.append(j)
+    counts = {"total": len(jobs), "skipped": len(jobs) - len(todo), "ran": 0, "errors": 0, "success": 0}
+    if not todo:
+        return counts
+    bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress, dynamic_ncols=True)
+    with ResultsWriter(out) as writer:
+        def record(rec: dict) -> None:
+            writer.write(rec)
+            counts["ran"] += 1
+            counts["errors"] += int("error" in rec)
+            counts["success"] += int(bool(rec.get("success")))
+            bar.update(1)
+            bar.set_postfix(success=f"{counts['success']}/{counts['ran']}")
+
+        if workers <= 1:
+            for j in todo:
+                record(run_episode(j))
+        else:
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
+                pending = {}
+                it = iter(todo)
+                for j in it:  # keep at most 2 * workers in flight, so that results stream in order-ish
+                    pending[pool.submit(run_episode, j)] = j
+                    if len(pending) >= 2 * workers:
+                        break
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        j = pending.pop(fut)
+                        try:
+                            rec = fut.result()
+                        except Exception:  # noqa: BLE001 (a dead worker)
+                            rec = {**{k: getattr(j, k) for k in ("cabinet", "joint", "hand", "solver", "split",
+                                                                   "seed", "light_scale", "pull")},
+                                   "success": False, "error": traceback.format_exc()}
+                        record(rec)
+                        nxt = next(it, None)
+                        if nxt is not None:
+                            pending[pool.submit(run_episode, nxt)] = nxt
+    bar.close()
+    return counts
+
+
+__all__ = ["EpisodeJob", "KEY_FIELDS", "ResultsWriter", "episode_key", "load_results", "make_jobs",
+           "run_episode", "run_jobs"]

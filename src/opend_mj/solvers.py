@@ -1,0 +1,119 @@
+"""Handle solvers: find the instructed handle's box in the front camera image.
+
+One small interface, :class:`HandleSolver`::
+
+    solver.solve(rgb, depth, instruction, camera_view) -> HandleBox | None
+
+``rgb`` is (H, W, 3) uint8, ``depth`` (H, W) float metres (planar), ``instruction`` the language
+instruction ("second top left drawer"), ``camera_view`` an :class:`opend_mj.camera.CameraView`
+(intrinsics and pose). ``None`` means "no handle found" (the episode fails at the locate stage).
+
+Solvers are made through a registry, ``get_solver(name, **options)``; a later module adds
+``fasterrcnn`` and ``cliport`` with :func:`register_solver`. The ``oracle`` solver returns the
+simulator's ground-truth box of the target handle; it gets that box through its constructor
+(``ground_truth``: a callable returning ``(u0, v0, u1, v1)`` or ``None``), never through globals.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class HandleBox:
+    """An image box (pixels, u right, v down) around a handle, optionally with its orientation."""
+
+    u0: float
+    v0: float
+    u1: float
+    v1: float
+    orientation: str | None = None  # "horizontal" | "vertical" | None (let the planner decide)
+    score: float = 1.0
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        return (0.5 * (self.u0 + self.u1), 0.5 * (self.v0 + self.v1))
+
+    @property
+    def width(self) -> float:
+        return self.u1 - self.u0
+
+    @property
+    def height(self) -> float:
+        return self.v1 - self.v0
+
+    def as_tuple(self) -> tuple[float, float, float, float]:
+        return (float(self.u0), float(self.v0), float(self.u1), float(self.v1))
+
+    def to_dict(self) -> dict:
+        return {"box": [round(x, 2) for x in self.as_tuple()], "orientation": self.orientation}
+
+
+class HandleSolver(Protocol):
+    """What the planner needs from a handle solver."""
+
+    name: str
+
+    def solve(self, rgb: np.ndarray, depth: np.ndarray, instruction: str, camera_view: Any) -> HandleBox | None:
+        ...
+
+
+class OracleSolver:
+    """Ground truth: the simulator's image box of the target's handle.
+
+    ``ground_truth`` is a callable that returns the target handle's box ``(u0, v0, u1, v1)`` (or
+    ``None`` if it is out of view), e.g. ``lambda: task.handle_boxes(physics)[task.target.joint]``.
+    """
+
+    name = "oracle"
+    needs_ground_truth = True
+
+    def __init__(self, ground_truth: Callable[[], tuple[float, float, float, float] | None] | None = None):
+        if ground_truth is None:
+            raise ValueError("the oracle solver needs ground_truth= (a callable returning the target's box)")
+        self._ground_truth = ground_truth
+
+    def solve(self, rgb, depth, instruction, camera_view) -> HandleBox | None:
+        box = self._ground_truth()
+        if box is None:
+            return None
+        return HandleBox(*map(float, box))
+
+
+#: name -> factory(**options) or "module:attribute" (imported on first use).
+_REGISTRY: dict[str, Callable[..., HandleSolver] | str] = {"oracle": OracleSolver}
+
+
+def register_solver(name: str, factory: Callable[..., HandleSolver] | str, *, overwrite: bool = False) -> None:
+    """Register a solver factory (a class or callable taking keyword options, or "module:attr")."""
+    if name in _REGISTRY and not overwrite and _REGISTRY[name] is not factory:
+        raise ValueError(f"solver {name!r} is already registered (pass overwrite=True)")
+    _REGISTRY[name] = factory
+
+
+def list_solvers() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def solver_factory(name: str) -> Callable[..., HandleSolver]:
+    if name not in _REGISTRY:
+        raise KeyError(f"unknown handle solver {name!r}; known: {', '.join(list_solvers())}")
+    factory = _REGISTRY[name]
+    if isinstance(factory, str):
+        module, attr = factory.split(":")
+        factory = getattr(importlib.import_module(module), attr)
+        _REGISTRY[name] = factory
+    return factory
+
+
+def needs_ground_truth(name: str) -> bool:
+    return bool(getattr(solver_factory(name), "needs_ground_truth", False))
+
+
+def get_solver(name: str, **options) -> HandleSolver:
+    """A solver instance. Options are passed to its factory (``ground_truth=`` for ``oracle``)."""
+    return solver_factory(name)(**options)
