@@ -16,6 +16,9 @@ COMMANDS: dict[str, str] = {
     "generate": "opend_mj.commands.assets:generate",
     "build-assets": "opend_mj.commands.dataset:build_assets",
     "render-hand": "opend_mj.commands.hands:render_hand",
+    "run": "opend_mj.commands.evaluate:run",
+    "score": "opend_mj.commands.evaluate:score",
+    "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",
     "gallery": "opend_mj.commands.render:gallery",
 }

@@ -78,6 +78,8 @@ class PlannerConfig:
     pull_bias_deg: float = 0.0
     #: open the fingers at the end and back off
     release: bool = False
+    #: doors named "right" in the instruction: dexterous fingers point to -y (toward the hinge)
+    flip_right_doors: bool = True
     #: an episode lasts at least this long (s of simulated time)
     min_time: float = 5.0
     #: handles whose image box aspect (long / short) is below this, and which are small, are knobs
@@ -322,6 +324,11 @@ class Planner:
         quat = orientation_for_handle(orientation)
         if orientation == "horizontal" and handle.centre[2] < cfg.flip_below:
             quat = quat_mul(quat, _rotz(math.pi))  # fingers down (site frame: rotate about +z)
+        if (result.target_kind == "door" and cfg.flip_right_doors and self.spec.hand_type != "parallel_gripper"
+                and "right" in obs.instruction.lower().split()):
+            # a right door hinges on the right (-y): turn the hand so that the fingers point toward the
+            # hinge; the door's pull on the handle then presses it into the finger curl
+            quat = quat_mul(quat, _rotz(math.pi))
         depth = float(cfg.grasp_depth.get(handle.kind, 0.0)) + self.spec.approach_offset * 0.0
         grasp_pos = handle.centre + np.array([depth, 0.0, 0.0])
         pre_pos = grasp_pos - np.array([cfg.pregrasp_distance, 0.0, 0.0])
@@ -408,18 +415,18 @@ class Planner:
                         turned = ang
                         yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
                         quat = orientation_for_handle_quat(quat0, math.radians(yaw))
+            pull_dir = direction
             if door and abs(turned) > 1.0 and cfg.pull_bias_deg:
                 b = math.radians(math.copysign(cfg.pull_bias_deg, turned))
                 c, sn = math.cos(b), math.sin(b)
-                direction = np.array([c * direction[0] - sn * direction[1], sn * direction[0] + c * direction[1], 0.0])
-                direction = direction / np.linalg.norm(direction)
+                pull_dir = np.array([c * direction[0] - sn * direction[1], sn * direction[0] + c * direction[1], 0.0])
             # advance the target along the direction, never more than `lead` ahead of the site
-            target = target + direction * cfg.pull_speed * dt
-            ahead = float((target - site) @ direction)
+            target = target + pull_dir * cfg.pull_speed * dt
+            ahead = float((target - site) @ pull_dir)
             if ahead > cfg.lead:
-                target = target - direction * (ahead - cfg.lead)
+                target = target - pull_dir * (ahead - cfg.lead)
             # keep the target on the line through the site along the direction (no sideways pull)
-            lateral = (target - site) - direction * float((target - site) @ direction)
+            lateral = (target - site) - pull_dir * float((target - site) @ pull_dir)
             target = target - lateral
             robot.step(target, quat, fingers)
             travelled = float(np.linalg.norm(site - start)) if not door else travelled + float(
@@ -446,3 +453,39 @@ def orientation_for_handle_quat(quat0, yaw: float) -> np.ndarray:
 
 __all__ = ["GRASP_FILE", "STAGES", "GraspProfile", "HandleEstimate", "Observation", "PlanResult", "Planner",
            "PlannerConfig", "Robot", "estimate_handle", "target_kind_from_instruction"]
+
+
+# --------------------------------------------------------------------------------------------------
+# Grasp search (`opend search-grasp`)
+# --------------------------------------------------------------------------------------------------
+def search_grasp(hand: str, cabinets_dir: Path, n_cabinets: int = 3, scales=(0.8, 1.0, 1.15),
+                 depths=(-0.01, 0.0, 0.008), workers: int = 1) -> GraspProfile:
+    """Grid search of finger closing (fraction of the spec's grasp profile) and grasp depth on the
+    handles of the first ``n_cabinets`` training cabinets, as the paper did: the first setting (in
+    grid order, scale 1 / depth 0 first) with the most opened targets, ties broken by mean open
+    ratio. Returns the chosen :class:`GraspProfile` (not saved)."""
+    from opend_mj.dataset import load_manifest
+    from opend_mj.evaluation import make_jobs, run_jobs
+    import tempfile
+
+    manifest = load_manifest(Path(cabinets_dir))
+    ids = [c["id"] for c in manifest.cabinets if c["split"] == "train"][:n_cabinets]
+    base = make_jobs(Path(cabinets_dir), [hand], "oracle", split="train", cabinet_ids=ids)
+    grid = sorted(((s, d) for s in scales for d in depths), key=lambda sd: (abs(sd[0] - 1.0), abs(sd[1])))
+    trials = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, (s, d) in enumerate(grid):
+            jobs = [replace(j, planner_overrides=(("close_scale", s), ("grasp_depth", {"bar": d, "knob": d})),
+                            use_grasp_file=False, seed=k) for j in base]
+            out = Path(tmp) / f"trial_{k}.jsonl"
+            run_jobs(jobs, out, workers=workers, progress=False)
+            from opend_mj.evaluation import load_results
+            recs = load_results(out)
+            n_ok = sum(bool(r.get("success")) for r in recs)
+            mean = float(np.mean([r.get("open_ratio", 0.0) or 0.0 for r in recs])) if recs else 0.0
+            trials.append({"close_scale": s, "grasp_depth": d, "success": n_ok, "episodes": len(recs),
+                           "mean_open_ratio": round(mean, 4)})
+    best = max(trials, key=lambda t: (t["success"], t["mean_open_ratio"]))
+    return GraspProfile(hand=hand, close_scale=best["close_scale"],
+                        grasp_depth={"bar": best["grasp_depth"], "knob": best["grasp_depth"]},
+                        search=trials)
