@@ -21,6 +21,9 @@ COMMANDS: dict[str, str] = {
     "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",
     "gallery": "opend_mj.commands.render:gallery",
+    "view": "opend_mj.commands.teleop:view",
+    "teleop": "opend_mj.commands.teleop:teleop",
+    "replay": "opend_mj.commands.teleop:replay",
 }
 
 

@@ -37,7 +37,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 
-from opend_mj.hands import orientation_for_handle, quat_mul  # noqa: E402
+# opend_mj.hands (dm_control) is imported where used: `opend teleop --help` stays light.
 
 #: key name -> command. Several keys may map to one command.
 KEYMAP: dict[str, str] = {
@@ -180,6 +180,8 @@ class TeleopController:
         elif command == "grip":
             self.grip_goal = 0.0 if self.grip_goal > 0.5 else 1.0
         elif command == "profile":
+            from opend_mj.hands import orientation_for_handle
+
             self.profile = "vertical" if self.profile == "horizontal" else "horizontal"
             self.target_quat = orientation_for_handle(self.profile)
         elif command == "step_down":
@@ -194,6 +196,8 @@ class TeleopController:
 
     def rotate(self, axis, angle: float) -> None:
         """Turn the root target by ``angle`` about a world axis (through the root)."""
+        from opend_mj.hands import quat_mul
+
         q = quat_mul(axis_angle_quat(axis, angle), self.target_quat)
         self.target_quat = q / np.linalg.norm(q)
 
