@@ -19,6 +19,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import composer  # noqa: E402
 from dm_control.composer.observation import observable  # noqa: E402
+import dm_env  # noqa: E402
 from dm_env import specs  # noqa: E402
 
 from opend_mj.cabinet import Cabinet, Target  # noqa: E402
@@ -148,10 +149,8 @@ class OpenCabinetTask(composer.Task):
         obs["root_pos"] = observable.MJCFFeature("xpos", self.hand.root_body)
         obs["root_quat"] = observable.MJCFFeature("xquat", self.hand.root_body)
         obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.checker.check(physics).open_ratio))
-        substeps = int(round(1.0 / self.config.control_hz / self.config.physics_timestep))
         for name, o in obs.items():
-            o.enabled = True
-            o.update_interval = substeps  # observed once per control step, not every substep
+            o.enabled = True  # default schedule: computed once, at the last substep of a control step
             self._task_observables[name] = o
 
     @property
@@ -221,6 +220,25 @@ class OpenCabinetTask(composer.Task):
         physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
         self._substep += 1
 
+    def fast_substeps(self, physics) -> list[str]:
+        """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
+
+        Does exactly what `before_substep` + `physics.step()` do for each substep, without
+        composer's per-substep Python hooks. Returns the names of MuJoCo instability warnings raised.
+        """
+        import mujoco
+
+        model, data = physics.model.ptr, physics.data.ptr
+        before = [int(data.warning[w].number) for w in _INSTABILITY_WARNINGS]
+        mocap_pos, mocap_quat, mid = data.mocap_pos, data.mocap_quat, self._mocap_id
+        for i in range(self._substeps):
+            if self._path_pos is not None:
+                mocap_pos[mid] = self._path_pos[i]
+                mocap_quat[mid] = self._path_quat[i]
+            mujoco.mj_step(model, data)
+        mujoco.mj_step1(model, data)  # keep position-dependent fields in sync, as dm_control does
+        return [w.name for w, n in zip(_INSTABILITY_WARNINGS, before) if data.warning[w].number > n]
+
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
         self.cabinet.close_all(physics)
@@ -230,6 +248,7 @@ class OpenCabinetTask(composer.Task):
         self.hand.set_finger_targets(physics, self.hand.spec.open_pose)
         self._root_target = (pos, quat)
         self._path_pos = None
+        self.physics_warnings: list[dict] = []
         self.start_pose = (pos.copy(), quat.copy())
         self._mocap_id = self.mocap.mocap_id(physics)
         self._ctrl_index = np.array([physics.model.name2id(a.full_identifier, "actuator")
@@ -284,6 +303,48 @@ class OpenCabinetTask(composer.Task):
         return {t.joint: box_in_image(self.handle_corners(physics, t), view) for t in self.cabinet.targets}
 
 
+import mujoco as _mujoco  # noqa: E402
+
+_INSTABILITY_WARNINGS = (_mujoco.mjtWarning.mjWARN_BADQACC, _mujoco.mjtWarning.mjWARN_BADQPOS,
+                         _mujoco.mjtWarning.mjWARN_BADQVEL)
+
+
+class OpenDEnvironment(composer.Environment):
+    """composer.Environment with the substep loop in one tight loop (no per-substep Python hooks).
+
+    The entities of this task have no substep hooks and every observable uses the default schedule
+    (read once, at the last substep), so the result is identical to composer's loop, several times
+    faster. MuJoCo instability warnings are recorded in `task.physics_warnings` and end the episode.
+    """
+
+    def step(self, action):
+        if self._reset_next_step:
+            self._reset_next_step = False
+            return self.reset()
+        task = self._task
+        self._hooks.before_step(self._physics_proxy, action, self._random_state)
+        updater = self._observation_updater
+        updater.prepare_for_next_control_step()
+        warnings = task.fast_substeps(self._physics)
+        updater._step_counter += self._n_sub_steps - 1  # the skipped per-substep updates (no-ops)
+        self._hooks.after_step(self._physics_proxy, self._random_state)
+        updater.update()
+        divergent = bool(warnings) or not np.all(np.isfinite(self._physics.data.qpos))
+        if divergent:
+            task.physics_warnings.append({"time": float(self._physics.data.time), "warnings": warnings or ["NaN"]})
+            reward, discount, terminating = 0.0, 0.0, True
+        else:
+            reward = task.get_reward(self._physics_proxy)
+            discount = task.get_discount(self._physics_proxy)
+            terminating = task.should_terminate_episode(self._physics_proxy) or \
+                self._physics.time() >= self._time_limit
+        obs = updater.get_observation()
+        if not terminating:
+            return dm_env.TimeStep(dm_env.StepType.MID, reward, discount, obs)
+        self._reset_next_step = True
+        return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount, obs)
+
+
 def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.ndarray:
     q = np.asarray(q, float) / np.linalg.norm(q)
     target = np.asarray(target, float) / np.linalg.norm(target)
@@ -302,5 +363,5 @@ def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.nda
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
     """A dm_control composer Environment for one episode (time limit from the config)."""
     task = OpenCabinetTask(episode, config)
-    return composer.Environment(task, time_limit=config.time_limit, random_state=episode.seed,
+    return OpenDEnvironment(task, time_limit=config.time_limit, random_state=episode.seed,
                                 strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False)
