@@ -175,3 +175,30 @@ def test_gymnasium_wrapper(drawer_case):
         assert obs["rgb"].shape == (256, 256, 3) and not terminated and reward == 0.0
     finally:
         env.close()
+
+
+def test_fast_environment_matches_composer_loop(drawer_case):
+    """The tight substep loop must simulate exactly what composer's hook-per-substep loop does."""
+    from dm_control import composer
+
+    from opend_mj.task import OpenCabinetTask, OpenDEnvironment
+
+    cabinet, target = drawer_case
+    episode = EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0)
+    finals = []
+    for cls in (composer.Environment, OpenDEnvironment):
+        task = OpenCabinetTask(episode, TaskConfig(enable_rgbd=False))
+        env = cls(task, time_limit=10, random_state=0, strip_singleton_obs_buffer_dim=True)
+        try:
+            env.reset()
+            pos, quat = task.start_pose
+            closed = task.hand.spec.grasp_profiles["horizontal"]
+            for k in range(90):
+                fingers = closed if k > 45 else task.hand.spec.open_pose
+                env.step(task.make_action(pos + np.array([0.3 * min(k / 45, 1), -0.2, 0.05]), quat, fingers))
+            finals.append((env.physics.bind(task.hand.root_body).xpos.copy(),
+                           env.physics.bind(task.hand.joints).qpos.copy()))
+        finally:
+            env.close()
+    assert np.abs(finals[0][0] - finals[1][0]).max() < 1e-6
+    assert np.abs(finals[0][1] - finals[1][1]).max() < 1e-3
