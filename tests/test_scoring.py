@@ -1,0 +1,57 @@
+"""`opend score` on a fixed results file: exact numbers."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from click.testing import CliRunner
+
+DATA = Path(__file__).parent / "data" / "results_small.jsonl"
+
+
+def test_score_tables_exact():
+    from opend_mj.scoring import load_records, report_markdown
+
+    md = report_markdown(load_records([DATA]))
+    assert "# Results (9 episodes)" in md
+    # 20 %: allegro train 0/1 drawers, 1/1 doors; test 2/2 drawers, 1/2 doors
+    assert ("| allegro | oracle | 0.0 (0/1) | 100.0 (1/1) | 50.0 (1/2) | 100.0 (2/2) | 50.0 (1/2) | 75.0 (3/4) |"
+            in md)
+    # the error line counts as a failed drawer episode (no target type recorded)
+    assert "| franka | oracle | - | - | - | 0.0 (0/2) | 100.0 (1/1) | 33.3 (1/3) |" in md
+    # 50 % and 90 % recomputed from open_ratio
+    assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 100.0 (2/2) | 0.0 (0/2) | 50.0 (2/4) |" in md
+    assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 50.0 (1/2) | 0.0 (0/2) | 25.0 (1/4) |" in md
+    # failure stages and wrong targets
+    assert "| allegro | oracle | train | 1 | 0 | 0 | 1 | 0 | 0 |" in md
+    assert "| franka | oracle | test | 2 | 0 | 1 | 0 | 0 | 1 |" in md
+    assert "| allegro | oracle | test | 4 | 1 | 0 |" in md
+    assert "| franka | oracle | test | 3 | 1 | 1 |" in md
+    assert "| allegro | oracle | 6 | 8.50 | 2.25 |" in md
+
+
+def test_score_command_csv_and_plot(tmp_path):
+    from opend_mj.cli import main
+
+    res = CliRunner().invoke(main, ["score", str(DATA), "--csv", str(tmp_path / "t.csv"),
+                                    "--plot", str(tmp_path / "t.png")])
+    assert res.exit_code == 0, res.output
+    assert "## Failure stages" in res.output
+    rows = list(csv.DictReader(open(tmp_path / "t.csv")))
+    assert len(rows) == 3 * 2 * 2 * 3  # thresholds x hands x splits x kinds
+    row = [r for r in rows if r["hand"] == "allegro" and r["threshold"] == "0.2" and r["split"] == "test"
+           and r["kind"] == "overall"][0]
+    assert (row["successes"], row["episodes"], row["success_rate"]) == ("3", "4", "0.7500")
+    assert (tmp_path / "t.png").stat().st_size > 1000
+
+
+def test_duplicate_keys_last_file_wins(tmp_path):
+    from opend_mj.scoring import load_records
+
+    lines = DATA.read_text().splitlines()
+    other = tmp_path / "more.jsonl"
+    other.write_text(lines[0].replace('"open_ratio": 0.55', '"open_ratio": 0.05') + "\n")
+    recs = load_records([DATA, other])
+    assert len(recs) == 9
+    assert [r["open_ratio"] for r in recs if r["cabinet"] == "proc_0000"] == [0.05]
