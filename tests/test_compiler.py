@@ -63,13 +63,19 @@ def test_real_cabinet_frame(real_cabinet):
         # The door's hinge is on its named side: +y is the viewer's left.
         anchor_y = t["anchor"][1]
         assert (anchor_y > 0) == (t["hinge_side"] == "left")
-    # The same in the MuJoCo model: the compiled geometry stands on z = 0.
+    # The same in the MuJoCo model: the visual meshes span exactly the recorded bounds (z from 0 up).
     model = real_cabinet.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    zmin = min(float((data.geom_xpos[g] - model.geom_rbound[g])[2]) for g in range(model.ngeom)
-               if model.geom_contype[g])
-    assert zmin < 0.05  # bounding spheres reach the floor plane
+    points = []
+    for g in range(model.ngeom):
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH and model.geom_contype[g] == 0:
+            m = model.geom_dataid[g]
+            verts = model.mesh_vert[model.mesh_vertadr[m]: model.mesh_vertadr[m] + model.mesh_vertnum[m]]
+            points.append(data.geom_xpos[g] + verts @ data.geom_xmat[g].reshape(3, 3).T)
+    points = np.vstack(points)
+    assert points.min(axis=0) == pytest.approx(lo, abs=1e-3)
+    assert points.max(axis=0) == pytest.approx(hi, abs=1e-3)
 
 
 def test_real_cabinet_handles_in_mujoco(real_cabinet):
