@@ -309,7 +309,7 @@ def replay_demo(demo: Demo, args: dict | str, cabinet_dir: Path | None = None) -
         obs: dict[str, list] = {}
         for a in demo.actions:
             for k, v in _obs_of(ts, demo.obs.keys()).items():
-                obs[k].append(v) if k in obs else obs.__setitem__(k, [v])
+                obs.setdefault(k, []).append(v)
             ts = env.step(a)
         o = env.task.outcome(env.physics)
         return ReplayResult(open_ratio=float(o.open_ratio), joint_value=float(o.joint_value),

@@ -94,6 +94,8 @@ B profile, START end, BACK reset, shoulders step size.
               help="Append each finished episode to this demonstration file.")
 @click.option("--no-gamepad", is_flag=True, help="Do not look for a gamepad.")
 def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, record, no_gamepad):
+    if (study is None) == (cabinet_id is None):
+        raise click.UsageError("give either --cabinet (one episode) or --study N")
     _display()
     from opend_mj import viewer
     from opend_mj.demos import DemoRecorder, write_demos
@@ -101,8 +103,6 @@ def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, re
     from opend_mj.teleop import (TeleopController, episode_record, run_study, sample_study, teleop_config,
                                  write_record)
 
-    if (study is None) == (cabinet_id is None):
-        raise click.UsageError("give either --cabinet (one episode) or --study N")
     config = teleop_config()
     recorders = []
 
