@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart install system-deps assets test bench bench-assets bench-hands clean
+.PHONY: quickstart install system-deps assets test bench bench-quick bench-assets bench-hands bench-task clean
 
 ## Set up from nothing and build the default (procedural) dataset.
 quickstart: install assets
@@ -38,7 +38,11 @@ test: install
 	$(BIN)/python -m pytest -q; status=$$?; \
 	if [ $$status -eq 5 ]; then echo "no tests were collected"; fi; exit $$status
 
-bench: bench-assets bench-hands
+bench: install
+	$(BIN)/python tools/bench.py
+
+bench-quick: install
+	$(BIN)/python tools/bench.py --quick
 
 bench-assets: install
 	$(BIN)/python tools/bench_assets.py --out build/bench-cabinets
@@ -48,3 +52,6 @@ bench-hands: install
 
 clean:
 	rm -rf build $(CABINETS)/*/ $(CABINETS)/manifest.json
+
+bench-task: install
+	$(BIN)/python tools/bench_task.py

@@ -29,14 +29,15 @@ def main() -> None:
     ap.add_argument("hands", nargs="*", default=hands.list_hands())
     ap.add_argument("--seconds", type=float, default=4.0, help="simulated seconds for 'alone'")
     args = ap.parse_args()
-    print(f"{'hand':10s} {'alone st/s':>11s} {'grasp H st/s':>13s} {'grasp V st/s':>13s}"
-          f" {'moved H cm':>10s} {'moved V cm':>10s}")
+    print("| hand | alone, mj_step/s | grasping horizontal bar, mj_step/s | grasping vertical bar, mj_step/s"
+          " | bar pulled H, cm | bar pulled V, cm |")
+    print("|---|---:|---:|---:|---:|---:|")
     for name in args.hands:
         alone = bench_alone(name, args.seconds)
         rh = hands.bar_pull_trial(name, "horizontal")
         rv = hands.bar_pull_trial(name, "vertical")
-        print(f"{name:10s} {alone:11.0f} {rh.steps_per_s:13.0f} {rv.steps_per_s:13.0f}"
-              f" {rh.bar_moved * 100:10.1f} {rv.bar_moved * 100:10.1f}", flush=True)
+        print(f"| {name} | {alone:.0f} | {rh.steps_per_s:.0f} | {rv.steps_per_s:.0f}"
+              f" | {rh.bar_moved * 100:.1f} | {rv.bar_moved * 100:.1f} |", flush=True)
 
 
 if __name__ == "__main__":

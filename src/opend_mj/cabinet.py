@@ -117,7 +117,15 @@ class Cabinet(composer.Entity):
         return self._joints[joint]
 
     def joint_values(self, physics) -> dict[str, float]:
-        return {name: float(physics.bind(j).qpos[0]) for name, j in self._joints.items()}
+        """Target joint values, read through qpos addresses cached per compiled model."""
+        model = physics.model.ptr
+        if getattr(self, "_qpos_cache", (None,))[0] is not model:
+            names = list(self._joints)
+            addresses = [int(physics.bind(self._joints[n]).qposadr) for n in names]
+            self._qpos_cache = (model, names, addresses)
+        _, names, addresses = self._qpos_cache
+        qpos = physics.data.qpos
+        return {n: float(qpos[a]) for n, a in zip(names, addresses)}
 
     def close_all(self, physics) -> None:
         """Reset-time only: every target closed and at rest."""

@@ -148,7 +148,7 @@ class OpenCabinetTask(composer.Task):
         obs["hand_joint_pos"] = observable.MJCFFeature("qpos", self.hand.joints)
         obs["root_pos"] = observable.MJCFFeature("xpos", self.hand.root_body)
         obs["root_quat"] = observable.MJCFFeature("xquat", self.hand.root_body)
-        obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.checker.check(physics).open_ratio))
+        obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.outcome(physics).open_ratio))
         for name, o in obs.items():
             o.enabled = True  # default schedule: computed once, at the last substep of a control step
             self._task_observables[name] = o
@@ -272,7 +272,7 @@ class OpenCabinetTask(composer.Task):
         return np.array([x, y, z]), np.asarray(quat, float)
 
     def get_reward(self, physics) -> float:
-        return float(min(1.0, self.checker.check(physics).open_ratio / self.config.success_threshold))
+        return float(min(1.0, self.outcome(physics).open_ratio / self.config.success_threshold))
 
     def get_discount(self, physics) -> float:
         return 1.0
@@ -282,6 +282,7 @@ class OpenCabinetTask(composer.Task):
 
     # ------------------------------------------------------------------ for solvers and analysis
     def outcome(self, physics) -> Outcome:
+        """The success checker's verdict on the current state."""
         return self.checker.check(physics)
 
     def camera_view(self, physics):

@@ -1,0 +1,139 @@
+"""`make bench`: every benchmark, written to BENCHMARKS.md with machine, versions and date.
+
+Sections (each a subprocess, so that its peak memory can be read):
+  assets  - tools/bench_assets.py: build seconds per cabinet cold / cached, hulls, mj_step of cabinets
+  hands   - tools/bench_hands.py: steps/s of each hand alone and grasping
+  task    - tools/bench_task.py: Task control steps/s vs raw mj_step (ratio), RGB / depth frames/s
+  episodes- here: full oracle episodes without rendering (real-time factor), episodes/min with 1 and 2
+            workers (scaling), solver inference ms per image
+
+    python tools/bench.py [--quick] [--sections assets,hands,task,episodes] [--out BENCHMARKS.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import opend_mj  # noqa: E402,F401  (off-screen EGL before mujoco loads)
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+
+def _run(args: list[str]) -> tuple[str, float, float]:
+    """Run a section; return its stdout, wall seconds and the peak RSS (MiB) of its processes."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    start = time.perf_counter()
+    proc = subprocess.run([PY, *args], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+    seconds = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    if proc.returncode != 0:
+        print(proc.stdout[-3000:], proc.stderr[-3000:], file=sys.stderr)
+        raise SystemExit(f"benchmark section {' '.join(args)} failed with exit code {proc.returncode}")
+    return proc.stdout, seconds, max(peak, before) / 1024.0
+
+
+def _tables(text: str) -> str:
+    """Keep the Markdown tables and headings a section printed (drop progress lines)."""
+    keep = [ln for ln in text.splitlines() if ln.startswith(("|", "#", "(", "procedural:", "mj_step"))]
+    return "\n".join(keep)
+
+
+def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
+    """Oracle episodes (allegro) with 1 and 2 workers; real-time factor and inference time."""
+    from opend_mj.evaluation import load_results, make_jobs, run_jobs
+
+    jobs = make_jobs(cabinets, ["allegro"], "oracle", split="test", limit=n_episodes)
+    rates = {1: [], 2: []}
+    rtf = []
+    for workers in (1, 2):
+        for _ in range(repeats):
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / "r.jsonl"
+                start = time.perf_counter()
+                run_jobs(jobs, out, workers=workers, progress=False)
+                minutes = (time.perf_counter() - start) / 60
+                records = load_results(out)
+            rates[workers].append(len(records) / minutes)
+            if workers == 1:
+                rtf += [r["sim_seconds"] / r["wall_seconds"] for r in records if r.get("wall_seconds")]
+    med1, med2 = statistics.median(rates[1]), statistics.median(rates[2])
+    lines = [f"Oracle episodes, allegro, first {len(jobs)} test targets, median of {repeats} runs each "
+             "(an episode includes building the scene: room, cabinet, hand).", "",
+             "| figure | value |", "|---|---:|",
+             f"| episodes/min, 1 worker | {med1:.1f} |",
+             f"| episodes/min, 2 workers | {med2:.1f} |",
+             f"| scaling 2 workers / 1 | {med2 / med1:.2f}x |",
+             f"| real-time factor of a whole episode (sim s / wall s, no rendering) | {statistics.median(rtf):.1f}x |"]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=ROOT / "BENCHMARKS.md")
+    parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
+    parser.add_argument("--sections", default="assets,hands,task,episodes")
+    parser.add_argument("--quick", action="store_true", help="smaller counts (a few minutes in all)")
+    args = parser.parse_args()
+    sections = [s.strip() for s in args.sections.split(",") if s.strip()]
+    quick = args.quick
+
+    import mujoco
+    import numpy
+
+    versions = {"python": platform.python_version(), "mujoco": mujoco.__version__, "numpy": numpy.__version__}
+    for name in ("dm_control", "torch", "coacd", "trimesh"):
+        try:
+            versions[name] = __import__(name).__version__
+        except Exception:
+            pass
+    try:
+        cpu = next(ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        cpu = platform.processor()
+    header = [
+        "# Benchmarks", "",
+        f"Written by `make bench` (`python tools/bench.py{' --quick' if quick else ''}`) on "
+        f"{datetime.date.today().isoformat()}.", "",
+        f"- machine: {cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}",
+        "- versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()),
+        "- rendering: MuJoCo EGL through Mesa llvmpipe (no GPU)", "",
+        "Figures are medians over cabinets / repeated runs; wall-clock figures depend on the machine's load.",
+        "",
+    ]
+    body = []
+    if "assets" in sections:
+        count = "60" if quick else "346"
+        out, secs, mem = _run(["tools/bench_assets.py", "--out", "build/bench-cabinets", "--count", count])
+        body += [f"## Asset build ({count} procedural sources + the real cabinet 45780)", "", _tables(out), "",
+                 f"Section wall time {secs:.0f} s, peak memory of one process {mem:.0f} MiB.", ""]
+    if "hands" in sections:
+        out, secs, mem = _run(["tools/bench_hands.py", "--seconds", "2" if quick else "4"])
+        body += ["## Hands", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
+    if "task" in sections:
+        out, secs, mem = _run(["tools/bench_task.py", "--cabinets", str(args.cabinets), "--count",
+                               "3" if quick else "8", "--seconds", "2" if quick else "4"])
+        body += ["## Task", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
+    if "episodes" in sections:
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        text = episodes_section(args.cabinets, 6 if quick else 16, 1 if quick else 3)
+        mem = max(before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+                  resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024.0
+        body += ["## Episodes", "", text, "", f"Peak memory of one process {mem:.0f} MiB.", ""]
+    args.out.write_text("\n".join(header + body) + "\n")
+    print(args.out.read_text())
+
+
+if __name__ == "__main__":
+    main()
