@@ -98,3 +98,33 @@ def test_target_kind_from_instruction():
 
     assert target_kind_from_instruction("second top left door") == "door"
     assert target_kind_from_instruction("drawer") == "drawer"
+
+
+@pytest.mark.parametrize("handle_y, panel, expected", [
+    (0.15, (-0.3, 0.2), "right"),   # handle near the left (+y) edge: the door hinges on the right
+    (-0.25, (-0.3, 0.2), "left"),   # handle near the right edge: hinged on the left
+    (-0.05, (-0.3, 0.2), None),     # handle in the middle: no verdict
+])
+def test_infer_hinge_side_from_depth(handle_y, panel, expected):
+    """A synthetic door plane: the hinge is on the side where the plane reaches farther."""
+    from opend_mj.camera import CameraIntrinsics, CameraView
+    from opend_mj.planner import HandleEstimate, infer_hinge_side
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
+    on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))  # points at depth 1
+    inside = (on_plane[:, 1] > panel[0]) & (on_plane[:, 1] < panel[1]) & (np.abs(on_plane[:, 2]) < 0.3)
+    depth = np.where(inside, 1.0, 2.5).reshape(256, 256)
+    handle = HandleEstimate(centre=np.array([0.96, handle_y, 0.0]), orientation="vertical", kind="bar",
+                            size=(0.015, 0.2), front_x=0.953, panel_x=1.0)
+    assert infer_hinge_side(handle, depth, view) == expected
+
+
+def test_hinge_side_from_instruction():
+    from opend_mj.planner import hinge_side_from_instruction
+
+    assert hinge_side_from_instruction("top right door") == "right"
+    assert hinge_side_from_instruction("left door") == "left"
+    assert hinge_side_from_instruction("door") is None
+    assert hinge_side_from_instruction("second left door") is None

@@ -80,6 +80,8 @@ class PlannerConfig:
     release: bool = False
     #: doors named "right" in the instruction: dexterous fingers point to -y (toward the hinge)
     flip_right_doors: bool = True
+    #: single doors (no side in the instruction): infer the hinge side from the depth image
+    infer_hinge: bool = True
     #: an episode lasts at least this long (s of simulated time)
     min_time: float = 5.0
     #: handles whose image box aspect (long / short) is below this, and which are small, are knobs
@@ -233,6 +235,47 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config: PlannerConf
                           front_x=front_x, panel_x=panel_x)
 
 
+def hinge_side_from_instruction(instruction: str) -> str | None:
+    """'left' / 'right' where the instruction names a side (double doors always do), else None."""
+    words = instruction.lower().split()
+    sides = [w for w in words if w in ("left", "right")]
+    return sides[-1] if sides and "second" not in words and "middle" not in words else None
+
+
+def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,
+                     gap_pixels: int = 3) -> str | None:
+    """Which side a single door hinges on, from the depth image alone.
+
+    Along the image row through the handle, walk left and right over pixels that lie on the door's
+    front plane (within `tolerance` of the panel seen behind the handle) until the plane ends; a handle
+    sits near the free edge, so the hinge is on the side where the plane reaches farther.
+    """
+    h, w = depth.shape
+    uc, vc = view.project(handle.centre[None, :])[0]
+    if not (np.isfinite(uc) and np.isfinite(vc)):
+        return None
+    row = int(np.clip(vc, 0, h - 1))
+    cols = np.arange(w) + 0.5
+    points = view.backproject(cols, np.full(w, row + 0.5), depth[row])
+    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
+    start = int(np.clip(uc, 0, w - 1))
+
+    def reach(step: int) -> float:
+        col, misses, last = start, 0, start
+        while 0 <= col < w and misses <= gap_pixels:
+            if on_plane[col]:
+                last, misses = col, 0
+            else:
+                misses += 1
+            col += step
+        return abs(float(points[last, 1] - handle.centre[1]))
+
+    toward_left, toward_right = reach(-1), reach(+1)  # image-left is +y (the viewer's left)
+    if max(toward_left, toward_right) < 0.05 or abs(toward_left - toward_right) < 0.02:
+        return None
+    return "left" if toward_left > toward_right else "right"
+
+
 def target_kind_from_instruction(instruction: str) -> str:
     words = instruction.strip().lower().split()
     last = words[-1] if words else ""
@@ -324,11 +367,16 @@ class Planner:
         quat = orientation_for_handle(orientation)
         if orientation == "horizontal" and handle.centre[2] < cfg.flip_below:
             quat = quat_mul(quat, _rotz(math.pi))  # fingers down (site frame: rotate about +z)
-        if (result.target_kind == "door" and cfg.flip_right_doors and self.spec.hand_type != "parallel_gripper"
-                and "right" in obs.instruction.lower().split()):
-            # a right door hinges on the right (-y): turn the hand so that the fingers point toward the
-            # hinge; the door's pull on the handle then presses it into the finger curl
-            quat = quat_mul(quat, _rotz(math.pi))
+        if result.target_kind == "door" and cfg.flip_right_doors and self.spec.hand_type != "parallel_gripper":
+            # Fingers point toward the hinge, so that the door's pull presses the handle into the finger
+            # curl. The side comes from the instruction where it names one (double doors), else from
+            # the depth image (single doors: the handle sits near the free edge).
+            hinge = hinge_side_from_instruction(obs.instruction)
+            if hinge is None and cfg.infer_hinge:
+                hinge = infer_hinge_side(handle, obs.depth, obs.camera_view)
+            result.events.append({"hinge_side": hinge})
+            if hinge == "right":
+                quat = quat_mul(quat, _rotz(math.pi))
         depth = float(cfg.grasp_depth.get(handle.kind, 0.0)) + self.spec.approach_offset * 0.0
         grasp_pos = handle.centre + np.array([depth, 0.0, 0.0])
         pre_pos = grasp_pos - np.array([cfg.pregrasp_distance, 0.0, 0.0])
