@@ -9,10 +9,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -117,8 +115,17 @@ def build_dataset(
     force: bool = False,
     progress: bool = True,
     log=print,
+    backend: str = "local",
+    address: str | None = None,
 ) -> Manifest:
-    """Compile every source (in parallel), then split the valid ones and write the manifest."""
+    """Compile every source (in parallel), then split the valid ones and write the manifest.
+
+    ``backend``: ``"local"`` (a spawn process pool of ``workers``, or this process for one worker) or
+    ``"ray"`` (``address`` of a cluster sharing this file system, or a local Ray instance); see
+    `opend_mj.backends`. Results come back to this process, which alone writes the manifest.
+    """
+    from opend_mj.backends import make_executor
+
     out_root = Path(out_root)
     out_root.mkdir(parents=True, exist_ok=True)
     cache_dir = out_root / ".cache"
@@ -136,15 +143,15 @@ def build_dataset(
         bar.update(1)
         bar.set_postfix(built=sum(r.status != "rejected" for r in results), refresh=False)
 
-    if workers == 1 or len(jobs) <= 1:
-        for job in jobs:
-            record(_compile_job(job))
-    else:
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = [pool.submit(_compile_job, job) for job in jobs]
-            for future in as_completed(futures):
-                record(future.result())
+    if backend == "local" and len(jobs) <= 1:
+        workers = 1
+    with make_executor(backend, workers, address) as executor:
+        for job, result, error in executor.imap_unordered(_compile_job, jobs):
+            if error is not None:  # a dead worker (e.g. CoACD crashed): a rejection, not a lost build
+                last = [ln for ln in error.strip().splitlines() if ln.strip()][-1:]
+                result = CompileResult(Path(job[0]).name, "rejected", "compiler_error",
+                                       f"{job[0]}: worker failed: {last[0] if last else 'unknown error'}")
+            record(result)
     bar.close()
 
     order = {Path(s).name: k for k, s in enumerate(source_dirs)}

@@ -8,16 +8,27 @@ Ground truth is used here only to label results (failure stage, success); the pl
 Results file: one JSON object per line, written by the parent process only, one ``write()`` of a
 full line, then flush and ``os.fsync``. On load, a torn last line (no newline, or not JSON) is
 dropped and truncated away, so after ``kill -9`` a rerun neither loses nor repeats an episode.
+Records arrive in completion order while a run is going (so nothing is held back in memory); when
+every job of the run is in the file, the file is rewritten (atomically: temporary file, fsync,
+rename) in job order, so that the same command gives the same file whatever ``--workers`` or
+``--backend`` (only ``wall_seconds`` differs). Records of other runs sharing the file keep their
+place, before this run's.
+
+Reliability: an episode never stops the run. A cabinet whose files are missing or corrupt (checked
+cheaply in the parent: ``cabinet.json`` parses, ``cabinet.xml`` is well-formed XML; deeper faults
+surface in the worker as ``CabinetError``) gives error records with ``error_reason`` naming the
+file; a task that raises (e.g. a non-finite action: ``ValueError: action has non-finite values``)
+gives an error record; a MuJoCo instability (BADQACC/BADQPOS/BADQVEL, or NaN state) ends the episode
+as a failure with ``failed_stage = "physics"`` and the warnings in ``physics_warnings``. Error
+records count as done on resume (delete their lines to retry them).
 """
 
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Iterable
@@ -27,6 +38,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np  # noqa: E402
 
 KEY_FIELDS = ("cabinet", "joint", "hand", "solver", "seed", "light_scale", "pull")
+#: Fields that depend on the machine and the clock, not on the episode (left out when comparing runs).
+WALL_CLOCK_FIELDS = ("wall_seconds",)
+_BASE_FIELDS = ("cabinet", "joint", "hand", "solver", "split", "seed", "light_scale", "pull")
 
 
 @dataclass(frozen=True)
@@ -165,15 +179,72 @@ def _box_contains(box, u, v, pad=3.0) -> bool:
 def run_episode(job: EpisodeJob) -> dict:
     """Run one episode; returns its record (never raises: errors become an ``error`` record)."""
     t0 = time.perf_counter()
-    base = {**{k: getattr(job, k) for k in ("cabinet", "joint", "hand", "solver", "split", "seed",
-                                            "light_scale", "pull")}}
     try:
         record = _run_episode(job)
-    except Exception:  # noqa: BLE001 (an episode's failure must not stop the run)
-        record = {"error": traceback.format_exc(), "success": False}
-    out = {**base, **record}
+    except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
+        record = error_record(job, exc)
+    out = {**_base(job), **record}
     out["wall_seconds"] = round(time.perf_counter() - t0, 3)
     return out
+
+
+def _base(job: EpisodeJob) -> dict:
+    return {k: getattr(job, k) for k in _BASE_FIELDS}
+
+
+def error_reason(exc: BaseException | str) -> str:
+    """One line saying what went wrong (the exception type and message; a file is named in it)."""
+    if isinstance(exc, str):  # a traceback's text: its last non-empty line
+        lines = [ln for ln in exc.strip().splitlines() if ln.strip()]
+        return lines[-1].strip() if lines else "unknown error"
+    return f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def error_record(job: EpisodeJob, exc: BaseException | str) -> dict:
+    """The record of an episode that could not run: ``error`` (traceback) and ``error_reason`` (one line)."""
+    if isinstance(exc, str):
+        tb = exc
+    else:
+        tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+        if not tb.startswith("Traceback"):
+            tb = "Traceback (most recent call last):\n" + tb
+    return {**_base(job), "success": False, "error": tb, "error_reason": error_reason(exc),
+            "error_kind": _error_kind(exc)}
+
+
+def _error_kind(exc) -> str:
+    from opend_mj.cabinet import CabinetError
+
+    if isinstance(exc, CabinetError) or (isinstance(exc, str) and "CabinetError" in exc):
+        return "cabinet"
+    if isinstance(exc, ValueError) and "action" in str(exc):
+        return "action"
+    return "exception"
+
+
+class PhysicsDiverged(RuntimeError):
+    """MuJoCo reported an instability (or the state went NaN): the episode is over."""
+
+
+class _StopAtLast:
+    """The environment as the planner sees it, except that a LAST time step ends the episode.
+
+    ``OpenDEnvironment`` ends an episode on a MuJoCo instability warning; composer would *reset*
+    the episode on the next ``step``, so the planner must not step again.
+    """
+
+    def __init__(self, env):
+        self._env = env
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def step(self, action):
+        ts = self._env.step(action)
+        if ts.last():
+            warnings = self._env.task.physics_warnings
+            raise PhysicsDiverged(f"physics instability: {warnings}" if warnings else "episode ended (time limit)")
+        return ts
 
 
 def _run_episode(job: EpisodeJob) -> dict:
@@ -226,7 +297,7 @@ def _run_episode(job: EpisodeJob) -> dict:
             probes["t_pull"] = float(physics.data.time)
 
     video = _VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
-    robot = Robot(env, on_step=video.capture if video else None)
+    robot = Robot(_StopAtLast(env), on_step=video.capture if video else None)
     overrides = dict(job.planner_overrides)
     pconfig = replace(PlannerConfig(pull=job.pull))
     grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
@@ -238,8 +309,11 @@ def _run_episode(job: EpisodeJob) -> dict:
     planner = Planner(solver, load_spec(job.hand), pconfig, grasp=None, on_stage=on_stage)
     if grasp is not None:
         planner.grasp = grasp  # knob orientation
+    warnings = task.physics_warnings  # the list of this episode (a reset would make a new one)
     try:
         plan = planner.run(robot, Observation(rgb=rgb, depth=depth, instruction=instruction, camera_view=view))
+    except PhysicsDiverged as exc:
+        return _diverged_record(job, task, physics, instruction, gt_box, warnings, str(exc))
     finally:
         if video:
             video.close()
@@ -277,7 +351,34 @@ def _run_episode(job: EpisodeJob) -> dict:
         "pulled": round(plan.pulled, 4),
         "turned_deg": round(plan.turned_deg, 2),
         "sim_seconds": round(float(physics.data.time), 3),
+        "physics_warnings": list(warnings),
         "video": str(video.path) if video else None,
+    }
+
+
+def _diverged_record(job, task, physics, instruction, gt_box, warnings, reason) -> dict:
+    """A failed episode: the physics went unstable (MuJoCo warnings in ``physics_warnings``)."""
+    try:
+        outcome = task.outcome(physics)
+        values = {"open_ratio": float(outcome.open_ratio), "range_ratio": float(outcome.range_ratio),
+                  "joint_value": float(outcome.joint_value), "others_moved": list(outcome.others_moved)}
+        values = {k: (v if not isinstance(v, float) or np.isfinite(v) else None) for k, v in values.items()}
+    except Exception:  # noqa: BLE001 (a NaN state)
+        values = {"open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
+    return {
+        "cabinet_dir": job.cabinet_dir,
+        "target_type": task.target.kind,
+        "instruction": instruction,
+        "room": task.episode.room_index(),
+        "success": False,
+        **values,
+        "failed_stage": "physics",
+        "planner_failed_stage": None,
+        "gt_box": [round(x, 2) for x in gt_box] if gt_box else None,
+        "sim_seconds": round(float(physics.data.time), 3),
+        "physics_warnings": list(warnings),
+        "failure_reason": reason,
+        "video": None,
     }
 
 
@@ -340,16 +441,38 @@ class _VideoRecorder:
 # The pool
 # --------------------------------------------------------------------------------------------------
 def _worker_init() -> None:
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    from opend_mj.backends import worker_init
+
+    worker_init()
+
+
+def check_cabinet_files(cabinet_dir: str | Path) -> None:
+    """Cheap checks of a compiled cabinet folder in the parent; raises ``CabinetError`` naming the file."""
+    import xml.etree.ElementTree as ET
+
+    from opend_mj.cabinet import CABINET_XML, CabinetError, load_cabinet_info
+
+    load_cabinet_info(Path(cabinet_dir))
+    xml_path = Path(cabinet_dir) / CABINET_XML
     try:
-        os.nice(5)
-    except OSError:
-        pass
+        ET.parse(xml_path)
+    except FileNotFoundError as exc:
+        raise CabinetError(f"{xml_path}: missing") from exc
+    except (ET.ParseError, OSError) as exc:
+        raise CabinetError(f"{xml_path}: corrupt MJCF ({exc})") from exc
 
 
-def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool = True) -> dict:
-    """Run the jobs not yet in ``out`` (resumable) and append their records. Returns counts."""
+def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool = True,
+             backend: str = "local", address: str | None = None, executor=None, sort: bool = True) -> dict:
+    """Run the jobs not yet in ``out`` (resumable) and append their records. Returns counts.
+
+    ``backend``: ``"local"`` (this process when ``workers == 1``, else a spawn pool of ``workers``)
+    or ``"ray"`` (``address`` of a cluster, or a local Ray instance); or pass an ``executor`` from
+    `opend_mj.backends`. Only this process writes ``out``. With ``sort``, the file ends in job order.
+    """
     from tqdm import tqdm
+
+    from opend_mj.backends import make_executor
 
     out = Path(out)
     done = {episode_key(r) for r in load_results(out)}
@@ -363,8 +486,20 @@ def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool
         todo.append(j)
     counts = {"total": len(jobs), "skipped": len(jobs) - len(todo), "ran": 0, "errors": 0, "success": 0}
     if not todo:
+        if sort:
+            sort_results(out, jobs)
         return counts
     bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress, dynamic_ncols=True)
+
+    # cabinets whose files are broken: their episodes become error records without running
+    broken: dict[str, BaseException] = {}
+    for cab_dir in dict.fromkeys(j.cabinet_dir for j in todo):
+        try:
+            check_cabinet_files(cab_dir)
+        except Exception as exc:  # noqa: BLE001 (CabinetError, or anything odd about the folder)
+            broken[cab_dir] = exc
+    runnable = [j for j in todo if j.cabinet_dir not in broken]
+
     with ResultsWriter(out) as writer:
         def record(rec: dict) -> None:
             writer.write(rec)
@@ -374,35 +509,69 @@ def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool
             bar.update(1)
             bar.set_postfix(success=f"{counts['success']}/{counts['ran']}")
 
-        if workers <= 1:
-            for j in todo:
-                record(run_episode(j))
-        else:
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-                pending = {}
-                it = iter(todo)
-                for j in it:  # keep at most 2 * workers in flight, so that results stream in order-ish
-                    pending[pool.submit(run_episode, j)] = j
-                    if len(pending) >= 2 * workers:
-                        break
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        j = pending.pop(fut)
-                        try:
-                            rec = fut.result()
-                        except Exception:  # noqa: BLE001 (a dead worker)
-                            rec = {**{k: getattr(j, k) for k in ("cabinet", "joint", "hand", "solver", "split",
-                                                                   "seed", "light_scale", "pull")},
-                                   "success": False, "error": traceback.format_exc()}
-                        record(rec)
-                        nxt = next(it, None)
-                        if nxt is not None:
-                            pending[pool.submit(run_episode, nxt)] = nxt
+        for j in todo:
+            if j.cabinet_dir in broken:
+                exc = broken[j.cabinet_dir]
+                record({**error_record(j, exc), "wall_seconds": 0.0})
+                if progress:
+                    bar.write(f"skipped {j.cabinet}/{j.joint}: {error_reason(exc)}")
+        if runnable:
+            ex = executor if executor is not None else make_executor(backend, workers, address,
+                                                                     initializer=_worker_init)
+            try:
+                for j, rec, err in ex.imap_unordered(run_episode, runnable):
+                    record(rec if err is None else {**error_record(j, err), "wall_seconds": None})
+            finally:
+                if executor is None:
+                    ex.close()
     bar.close()
+    if sort:
+        sort_results(out, jobs)
     return counts
 
 
-__all__ = ["EpisodeJob", "KEY_FIELDS", "ResultsWriter", "episode_key", "load_results", "make_jobs",
-           "run_episode", "run_jobs"]
+def sort_results(path: Path, jobs: list[EpisodeJob]) -> bool:
+    """Rewrite ``path`` with this run's records in job order (others first, in their order).
+
+    Atomic (a temporary file, fsync, rename), so a ``kill -9`` leaves either the old or the new file.
+    Returns whether the file was rewritten (not when it is already in order, or jobs are missing).
+    """
+    path = Path(path)
+    records = load_results(path)
+    if not records:
+        return False
+    index = {j.key(): i for i, j in enumerate(jobs)}
+    if not set(index) <= {episode_key(r) for r in records}:
+        return False  # an incomplete run: leave the file as it is
+    lines = [ln for ln in path.read_bytes().split(b"\n") if ln.strip()]
+    if len(lines) != len(records):
+        return False
+    order = sorted(range(len(records)), key=lambda i: (1, index[k], i) if (k := episode_key(records[i])) in index
+                   else (0, 0, i))
+    if order == list(range(len(records))):
+        return False
+    tmp = path.with_name(f".{path.name}.sorting")
+    with open(tmp, "wb") as f:
+        f.write(b"".join(lines[i] + b"\n" for i in order))
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    try:
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    except OSError:
+        pass
+    return True
+
+
+def strip_wall_clock(record: dict) -> dict:
+    """A record without its machine- and clock-dependent fields (to compare runs)."""
+    return {k: v for k, v in record.items() if k not in WALL_CLOCK_FIELDS}
+
+
+__all__ = ["EpisodeJob", "KEY_FIELDS", "PhysicsDiverged", "ResultsWriter", "WALL_CLOCK_FIELDS",
+           "check_cabinet_files", "episode_key", "error_reason", "error_record", "load_results", "make_jobs",
+           "run_episode", "run_jobs", "sort_results", "strip_wall_clock"]

@@ -24,8 +24,14 @@ import click
               help="Scale from PartNet units to metres (default 0.7, as in the paper).")
 @click.option("--force", is_flag=True, help="Rebuild even where the cache is valid.")
 @click.option("--no-progress", is_flag=True, help="No progress bar (for logs).")
-def build_assets(source, out, ids, count, seed, workers, scale, force, no_progress) -> None:
+@click.option("--backend", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+              help="local: this machine's process pool; ray: a Ray cluster (--address) or a local Ray instance.")
+@click.option("--address", default=None, help="Ray cluster address (e.g. auto); with --backend ray. The "
+              "cluster's machines must see --source and --out at the same paths.")
+def build_assets(source, out, ids, count, seed, workers, scale, force, no_progress, backend, address) -> None:
     """Compile cabinets into MJCF, filter them, split them and write the manifest."""
+    if address is not None and backend != "ray":
+        raise click.UsageError("--address needs --backend ray")
     from opend_mj.config import CompilerConfig, DatasetConfig
     from opend_mj.dataset import build_dataset, format_split_table, list_sources
 
@@ -45,8 +51,10 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, no_progre
         raise click.UsageError(str(exc)) from exc
     if count and id_list is None:
         sources = sources[:count]
+    if backend == "ray" and workers is None:
+        workers = 2
     manifest = build_dataset(sources, out, config=config, dataset=dataset, workers=workers, force=force,
-                             progress=not no_progress)
+                             progress=not no_progress, backend=backend, address=address)
     info = manifest.info
     click.echo(f"\n{len(manifest.cabinets)} cabinets valid of {info['sources']} sources "
                f"({info['built']} built, {info['cached']} cached, {len(manifest.rejected)} rejected) "

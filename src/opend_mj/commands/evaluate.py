@@ -7,30 +7,75 @@ from pathlib import Path
 import click
 
 
+def _check_hands(ctx, param, value):
+    from opend_mj.hands import list_hands
+
+    known = list_hands()
+    for name in value:
+        if name not in known:
+            raise click.BadParameter(f"unknown hand {name!r}; known: {', '.join(known)}", ctx, param)
+    return value
+
+
+def _check_solver(ctx, param, value):
+    from opend_mj.solvers import list_solvers
+
+    if value not in list_solvers():
+        raise click.BadParameter(f"unknown handle solver {value!r}; known: {', '.join(list_solvers())}", ctx, param)
+    return value
+
+
+def _check_cabinets(ctx, param, value):
+    if not (Path(value) / "manifest.json").is_file():
+        raise click.BadParameter(f"{value}: no manifest.json here; run `opend build-assets --out {value}` first",
+                                 ctx, param)
+    return value
+
+
 @click.command("run")
-@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True,
+@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True, callback=_check_hands,
               help="Hand name (repeat for several).")
-@click.option("--solver", default="oracle", show_default=True)
+@click.option("--solver", default="oracle", show_default=True, callback=_check_solver)
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
-@click.option("--workers", type=int, default=1, show_default=True)
-@click.option("--out", type=click.Path(path_type=Path), default=Path("results.jsonl"), show_default=True)
-@click.option("--cabinets", "cabinets_dir", type=click.Path(path_type=Path), default=Path("cabinets"),
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Episodes at the same time (local: processes; ray: CPUs of a local Ray instance, min 2).")
+@click.option("--backend", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+              help="local: this machine's process pool; ray: a Ray cluster (--address) or a local Ray instance.")
+@click.option("--address", default=None, help="Ray cluster address (e.g. auto, ray://head:10001); with --backend ray.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("results.jsonl"),
               show_default=True)
-@click.option("--limit", type=int, default=None, help="First K targets of the split only.")
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--video", "video_dir", type=click.Path(path_type=Path), default=None,
+@click.option("--video", "video_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write an MP4 per episode here.")
-@click.option("--light-scale", type=float, default=1.0, show_default=True)
+@click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
 @click.option("--pull", type=click.Choice(["straight", "arc"]), default="arc", show_default=True)
-def run(hands, solver, split, workers, out, cabinets_dir, limit, seed, video_dir, light_scale, pull):
-    """Run episodes (resumable: episodes already in --out are skipped)."""
+def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
+        pull):
+    """Run episodes (resumable: episodes already in --out are skipped).
+
+    Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
+    `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments.
+    """
     from opend_mj.evaluation import make_jobs, run_jobs
 
+    if address is not None and backend != "ray":
+        raise click.UsageError("--address needs --backend ray")
     jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
                      limit=limit, video_dir=video_dir)
-    counts = run_jobs(jobs, out, workers=workers)
+    if not jobs:
+        click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
+    try:
+        counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address)
+    except ValueError as exc:  # a results file corrupt in its middle
+        raise click.ClickException(str(exc)) from exc
     click.echo(f"{counts['ran']} episodes run, {counts['skipped']} already done, {counts['errors']} errors, "
                f"{counts['success']} successes -> {out}")
+    if counts["ran"] and counts["errors"] == counts["ran"]:
+        click.echo("error: every episode failed to run (see error_reason in the results file)", err=True)
+        raise SystemExit(1)
 
 
 @click.command("score")
