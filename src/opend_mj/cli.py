@@ -21,6 +21,8 @@ COMMANDS: dict[str, str] = {
     "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",
     "gallery": "opend_mj.commands.render:gallery",
+    "make-data": "opend_mj.commands.learn:make_data",
+    "train": "opend_mj.commands.learn:train",
     "view": "opend_mj.commands.teleop:view",
     "teleop": "opend_mj.commands.teleop:teleop",
     "replay": "opend_mj.commands.teleop:replay",

@@ -85,7 +85,11 @@ class OracleSolver:
 
 
 #: name -> factory(**options) or "module:attribute" (imported on first use).
-_REGISTRY: dict[str, Callable[..., HandleSolver] | str] = {"oracle": OracleSolver}
+_REGISTRY: dict[str, Callable[..., HandleSolver] | str] = {
+    "oracle": OracleSolver,
+    "fasterrcnn": "opend_mj.learned.detector:FasterRCNNSolver",  # checkpoints/fasterrcnn.pt
+    "cliport": "opend_mj.learned.affordance:CLIPortSolver",  # checkpoints/cliport.pt
+}
 
 
 def register_solver(name: str, factory: Callable[..., HandleSolver] | str, *, overwrite: bool = False) -> None:
