@@ -49,6 +49,10 @@ def worker_init(nice: int = 5) -> None:
             pass
 
 
+class BackendError(RuntimeError):
+    """A backend that cannot start (Ray missing, or no cluster at the address)."""
+
+
 class Executor:
     """Base class: ``imap_unordered(fn, items)`` yields ``(item, result, error)`` in completion order."""
 
@@ -139,7 +143,7 @@ class RayBackend(Executor):
         try:
             import ray
         except ImportError as exc:  # pragma: no cover (ray is a dependency)
-            raise RuntimeError("the ray backend needs `pip install 'ray>=2.9'`") from exc
+            raise BackendError(f"the ray backend needs `pip install 'ray>=2.9'` ({exc})") from exc
         import logging
 
         import opend_mj  # noqa: F401 (the package must import in the driver before workers start)
@@ -155,7 +159,11 @@ class RayBackend(Executor):
                                 configure_logging=True, runtime_env={"env_vars": dict(WORKER_ENV)})
             if address is None:
                 kwargs["num_cpus"] = num_cpus or max(2, self.workers)
-            ray.init(address=address, **kwargs)
+            try:
+                ray.init(address=address, **kwargs)
+            except Exception as exc:  # noqa: BLE001 (ConnectionError, RuntimeError, ... depending on the version)
+                where = f"the Ray cluster at {address!r}" if address else "a local Ray instance"
+                raise BackendError(f"could not start {where}: {type(exc).__name__}: {exc}") from exc
         self.address = address
         self.max_retries = max_retries
         self._remote_cache: dict = {}
@@ -227,5 +235,5 @@ def make_executor(backend: str = "local", workers: int = 1, address: str | None 
     raise ValueError(f"unknown backend {backend!r}; known: {', '.join(BACKENDS)}")
 
 
-__all__ = ["BACKENDS", "Executor", "ProcessPoolBackend", "RayBackend", "SerialExecutor", "make_executor",
+__all__ = ["BACKENDS", "BackendError", "Executor", "ProcessPoolBackend", "RayBackend", "SerialExecutor", "make_executor",
            "worker_init"]

@@ -53,8 +53,13 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, no_progre
         sources = sources[:count]
     if backend == "ray" and workers is None:
         workers = 2
-    manifest = build_dataset(sources, out, config=config, dataset=dataset, workers=workers, force=force,
-                             progress=not no_progress, backend=backend, address=address)
+    from opend_mj.backends import BackendError
+
+    try:
+        manifest = build_dataset(sources, out, config=config, dataset=dataset, workers=workers, force=force,
+                                 progress=not no_progress, backend=backend, address=address)
+    except BackendError as exc:
+        raise click.ClickException(str(exc)) from exc
     info = manifest.info
     click.echo(f"\n{len(manifest.cabinets)} cabinets valid of {info['sources']} sources "
                f"({info['built']} built, {info['cached']} cached, {len(manifest.rejected)} rejected) "

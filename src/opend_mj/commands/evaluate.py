@@ -59,6 +59,7 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
     `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments.
     """
+    from opend_mj.backends import BackendError
     from opend_mj.evaluation import make_jobs, run_jobs
 
     if address is not None and backend != "ray":
@@ -69,7 +70,7 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
         counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address)
-    except ValueError as exc:  # a results file corrupt in its middle
+    except (ValueError, BackendError) as exc:  # a results file corrupt in its middle; no Ray cluster
         raise click.ClickException(str(exc)) from exc
     click.echo(f"{counts['ran']} episodes run, {counts['skipped']} already done, {counts['errors']} errors, "
                f"{counts['success']} successes -> {out}")
