@@ -305,3 +305,23 @@ def test_sort_keeps_other_runs_first(tmp_path):
     assert [r["joint"] for r in _lines(out)] == ["j", "joint_0", "joint_1", "joint_2"]
     assert not sort_results(out, jobs)  # already in order: not rewritten
     assert not list(tmp_path.glob(".*sorting"))
+
+
+# --------------------------------------------------------------------------------------------------
+# a pool worker that dies
+# --------------------------------------------------------------------------------------------------
+def _die_on_2(x: int) -> int:
+    if x == 2:
+        os._exit(9)  # as if killed (OOM killer, segfault)
+    return x * 10
+
+
+def test_a_dead_pool_worker_is_an_error_and_the_others_go_on():
+    from opend_mj.backends import ProcessPoolBackend
+
+    with ProcessPoolBackend(2, initializer=None) as ex:
+        got = {item: (result, error) for item, result, error in ex.imap_unordered(_die_on_2, range(5))}
+    assert sorted(got) == [0, 1, 2, 3, 4]
+    assert all(got[i] == (10 * i, None) for i in (0, 1, 3, 4))
+    assert got[2][0] is None and "died" in got[2][1]
+    assert ex.restarts >= 2

@@ -95,37 +95,90 @@ class SerialExecutor(Executor):
 
 
 class ProcessPoolBackend(Executor):
-    """A ``spawn`` process pool on this machine."""
+    """A ``spawn`` process pool on this machine.
+
+    A worker that dies (``kill -9``, a segfault, the OOM killer) breaks a ``ProcessPoolExecutor``:
+    every job in flight fails. Here the pool is rebuilt and the jobs that were in flight are rerun
+    one at a time; the one that kills its worker again alone is reported as an error, the others
+    give their results. The caller's parent process is never lost.
+    """
 
     name = "local"
 
     def __init__(self, workers: int = 2, initializer: Callable[[], None] | None = worker_init):
         super().__init__(workers)
+        self._initializer = initializer
+        self._pool = self._new_pool()
+        self.restarts = 0
+
+    def _new_pool(self) -> ProcessPoolExecutor:
         ctx = multiprocessing.get_context("spawn")
-        self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=initializer)
+        return ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=self._initializer)
+
+    def _restart(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = self._new_pool()
+        self.restarts += 1
 
     def imap_unordered(self, fn, items, max_in_flight=None):
+        from concurrent.futures.process import BrokenProcessPool
+
         limit = max(1, max_in_flight or 2 * self.workers)
         it = iter(items)
-        pending: dict = {}
+        pending: dict = {}  # future -> (item, alone)
+        suspects: list = []  # in flight when a worker died: rerun one at a time
+
+        def submit(item, alone: bool) -> None:
+            try:
+                fut = self._pool.submit(fn, item)
+            except BrokenProcessPool:
+                self._restart()
+                fut = self._pool.submit(fn, item)
+            pending[fut] = (item, alone)
 
         def fill() -> None:
+            if suspects:
+                if not pending:
+                    submit(suspects.pop(0), True)
+                return
             while len(pending) < limit:
                 item = next(it, _END)
                 if item is _END:
                     return
-                pending[self._pool.submit(fn, item)] = item
+                submit(item, False)
+
+        def settle(fut):
+            """(item, result, error) of a finished future, or None when it is a suspect to rerun."""
+            item, alone = pending.pop(fut)
+            try:
+                return item, fut.result(), None
+            except BrokenProcessPool:
+                if alone:
+                    return item, None, ("BrokenProcessPool: the worker process running this job died "
+                                        "(killed, out of memory or crashed), twice")
+                suspects.append(item)
+                return None
+            except Exception:  # noqa: BLE001 (the job raised)
+                return item, None, traceback.format_exc()
 
         fill()
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            broken = False
             for fut in finished:
-                item = pending.pop(fut)
-                try:
-                    result, error = fut.result(), None
-                except Exception:  # noqa: BLE001 (a task that raised, or a dead worker)
-                    result, error = None, traceback.format_exc()
-                yield item, result, error
+                broken |= isinstance(fut.exception(), BrokenProcessPool)
+                out = settle(fut)
+                if out is not None:
+                    yield out
+            if broken:  # every other job in flight fails too: collect them, then a fresh pool
+                rest, _ = wait(list(pending), timeout=60)
+                for fut in rest:
+                    out = settle(fut)
+                    if out is not None:
+                        yield out
+                for fut in list(pending):  # did not settle in time: rerun them
+                    suspects.append(pending.pop(fut)[0])
+                self._restart()
             fill()
 
     def close(self) -> None:
