@@ -18,14 +18,14 @@ def test_score_tables_exact():
     # 20 %: allegro train 0/1 drawers, 1/1 doors; test 2/2 drawers, 1/2 doors
     assert ("| allegro | oracle | 0.0 (0/1) | 100.0 (1/1) | 50.0 (1/2) | 100.0 (2/2) | 50.0 (1/2) | 75.0 (3/4) |"
             in md)
-    # the error line counts as a failed drawer episode (no target type recorded)
+    # the error line counts as a failed drawer episode (error lines carry the target type from the manifest)
     assert "| franka | oracle | - | - | - | 0.0 (0/2) | 100.0 (1/1) | 33.3 (1/3) |" in md
     # 50 % and 90 % recomputed from open_ratio
     assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 100.0 (2/2) | 0.0 (0/2) | 50.0 (2/4) |" in md
     assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 50.0 (1/2) | 0.0 (0/2) | 25.0 (1/4) |" in md
     # failure stages and wrong targets
     assert "| allegro | oracle | train | 1 | 0 | 0 | 1 | 0 | 0 |" in md
-    assert "| franka | oracle | test | 2 | 0 | 1 | 0 | 0 | 1 |" in md
+    assert "| franka | oracle | test | 2 | 0 | 1 | 0 | 0 | 0 | 1 |" in md
     assert "| allegro | oracle | test | 4 | 1 | 0 |" in md
     assert "| franka | oracle | test | 3 | 1 | 1 |" in md
     assert "| allegro | oracle | 6 | 8.50 | 2.25 |" in md
@@ -55,3 +55,15 @@ def test_duplicate_keys_last_file_wins(tmp_path):
     recs = load_records([DATA, other])
     assert len(recs) == 9
     assert [r["open_ratio"] for r in recs if r["cabinet"] == "proc_0000"] == [0.05]
+
+
+def test_record_without_type_counts_in_overall_only():
+    from opend_mj.scoring import success_table
+
+    recs = [{"cabinet": "c", "joint": "j", "hand": "h", "solver": "s", "split": "test", "seed": 0,
+             "light_scale": 1.0, "pull": "arc", "error": "boom"},
+            {"cabinet": "c", "joint": "k", "hand": "h", "solver": "s", "split": "test", "seed": 0,
+             "light_scale": 1.0, "pull": "arc", "target_type": "door", "open_ratio": 0.5, "success": True}]
+    row = success_table(recs)[0]
+    assert row["test_overall"][1:] == (1, 2)
+    assert row["test_door"][1:] == (1, 1) and row["test_drawer"][2] == 0

@@ -58,6 +58,9 @@ class EpisodeJob:
     room: int | None = None
     planner_overrides: tuple = ()  # ((field, value), ...) for grasp search / experiments
     use_grasp_file: bool = True
+    #: From the manifest, so that even an episode that could not run is scored in its column.
+    target_type: str | None = None
+    instruction: str | None = None
 
     def key(self) -> tuple:
         return episode_key(asdict(self))
@@ -165,7 +168,8 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
             jobs.append(EpisodeJob(cabinet=cab["id"], cabinet_dir=str(cab_dir), joint=tgt["joint"],
                                    split=cab["split"], hand=hand, solver=solver, seed=seed,
                                    light_scale=light_scale, pull=pull,
-                                   video_dir=str(video_dir) if video_dir else None))
+                                   video_dir=str(video_dir) if video_dir else None,
+                                   target_type=tgt.get("type"), instruction=tgt.get("instruction")))
     return jobs
 
 
@@ -189,7 +193,11 @@ def run_episode(job: EpisodeJob) -> dict:
 
 
 def _base(job: EpisodeJob) -> dict:
-    return {k: getattr(job, k) for k in _BASE_FIELDS}
+    base = {k: getattr(job, k) for k in _BASE_FIELDS}
+    for k in ("target_type", "instruction"):
+        if getattr(job, k) is not None:
+            base[k] = getattr(job, k)
+    return base
 
 
 def error_reason(exc: BaseException | str) -> str:

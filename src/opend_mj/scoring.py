@@ -15,7 +15,7 @@ from typing import Iterable
 THRESHOLDS = (0.2, 0.5, 0.9)
 SPLITS = ("train", "test")
 KINDS = ("drawer", "door", "overall")
-STAGE_ORDER = ("locate", "approach", "grasp", "pull", "error")
+STAGE_ORDER = ("locate", "approach", "grasp", "pull", "physics", "error")
 
 
 def load_records(paths: Iterable[Path]) -> list[dict]:
@@ -32,8 +32,14 @@ def _ok(r: dict, threshold: float) -> bool:
     return "error" not in r and float(r.get("open_ratio") or 0.0) > threshold
 
 
-def _kind(r: dict) -> str:
-    return r.get("target_type") or ("door" if str(r.get("instruction", "")).endswith("door") else "drawer")
+def _kind(r: dict) -> str | None:
+    """door / drawer; None for a record that says neither (it counts in "overall" only)."""
+    if r.get("target_type"):
+        return r["target_type"]
+    instruction = str(r.get("instruction", "")).strip()
+    if not instruction:
+        return None
+    return "door" if instruction.endswith("door") else "drawer"
 
 
 def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
