@@ -7,10 +7,19 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart install system-deps assets test bench bench-quick bench-assets bench-hands bench-task clean
+.PHONY: quickstart evaluate install system-deps assets test bench bench-quick bench-assets bench-hands bench-task clean
 
-## Set up from nothing and build the default (procedural) dataset.
-quickstart: install assets
+## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
+## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
+quickstart: install assets evaluate
+
+QUICKSTART_OUT ?= results/quickstart
+evaluate: install
+	mkdir -p $(QUICKSTART_OUT)
+	$(BIN)/opend run --hand allegro --solver oracle --split test --workers $(WORKERS) \
+		--cabinets $(CABINETS) --out $(QUICKSTART_OUT)/oracle_allegro_test.jsonl
+	$(BIN)/opend score $(QUICKSTART_OUT)/oracle_allegro_test.jsonl \
+		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:
