@@ -143,7 +143,8 @@ def plot_success(records: list[dict], path: Path, threshold: float = 0.2) -> Pat
 
     rows = success_table(records, threshold)
     labels = [f"{r['hand']}\n{r['solver']}" for r in rows]
-    cols = [(s, k) for s in SPLITS for k in KINDS]
+    # only the split x kind columns that hold episodes
+    cols = [(s, k) for s in SPLITS for k in KINDS if any(r[f"{s}_{k}"][2] for r in rows)]
     x = np.arange(len(rows))
     width = 0.8 / len(cols)
     fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(rows)), 4))
@@ -153,8 +154,9 @@ def plot_success(records: list[dict], path: Path, threshold: float = 0.2) -> Pat
     ax.set_xticks(x)
     ax.set_xticklabels(labels)
     ax.set_ylabel(f"success (%), open ratio > {int(threshold * 100)} %")
-    ax.set_ylim(0, 100)
-    ax.legend(fontsize=7, ncol=2)
+    ax.set_ylim(0, 105)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
