@@ -154,7 +154,7 @@ def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     torch.manual_seed(0)
     ckpt = tmp_path / "cliport.pt"
     cfg = AffordanceConfig(text_encoder="bow", image_size=64, fusion_layers=2)
-    meta = train_cliport(out, ckpt, cfg, epochs=6, batch_size=4, lr=3e-3, progress=False, log=lambda s: None)
+    meta = train_cliport(out, ckpt, cfg, epochs=3, batch_size=4, lr=3e-3, max_train=4, progress=False, log=lambda s: None)
     losses = [h["train_loss"] for h in meta["history"]]
     assert losses[-1] < losses[0]
     assert ckpt.stat().st_size < 15e6
@@ -165,9 +165,9 @@ def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     assert solver.last_map.shape == (256, 256)
     assert 0 <= box.u0 < box.u1 <= 256 and 0 <= box.v0 < box.v1 <= 256
     # resume continues from the saved state
-    meta2 = train_cliport(out, ckpt, cfg, epochs=7, batch_size=4, lr=3e-3, progress=False, resume=True,
+    meta2 = train_cliport(out, ckpt, cfg, epochs=4, batch_size=4, lr=3e-3, max_train=4, progress=False, resume=True,
                           log=lambda s: None)
-    assert [h["epoch"] for h in meta2["history"]] == list(range(1, 8))
+    assert [h["epoch"] for h in meta2["history"]] == list(range(1, 5))
 
 
 def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
@@ -176,15 +176,15 @@ def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
 
     out, _ = tiny_data
     torch.manual_seed(0)
-    cfg = DetectorConfig(min_size=256, max_size=256)
+    cfg = DetectorConfig(min_size=160, max_size=160)
     model = build_detector(cfg)
-    recs = load_records(out)[:2]
+    recs = load_records(out)[:1]
     images = [torch.from_numpy(load_images(out, r)[0].copy()).permute(2, 0, 1).float() / 255 for r in recs]
     targets = [detector_targets(r) for r in recs]
     opt = torch.optim.AdamW(model.parameters(), lr=5e-4)
     model.train()
     losses = []
-    for _ in range(6):
+    for _ in range(4):
         loss = sum(model(images, targets).values())
         opt.zero_grad()
         loss.backward()

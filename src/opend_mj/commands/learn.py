@@ -59,9 +59,12 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--fusion", type=click.Choice(["film", "product"]), default="film", show_default=True)
 @click.option("--image-size", type=int, default=128, show_default=True, help="cliport input resolution.")
 @click.option("--text-encoder", default="minilm", show_default=True, help="cliport text encoder (minilm, bow).")
+@click.option("--evaluate", "evaluate_subset", type=click.Choice(["train", "val", "test"]), default=None,
+              help="Do not train: evaluate the checkpoint (--out) on this subset of --data and print the metrics.")
+@click.option("--threshold", type=float, default=None, help="fasterrcnn detection threshold for --evaluate.")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
-          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, progress):
+          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
@@ -71,6 +74,14 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         torch.set_num_threads(threads)
     out = out or Path(f"checkpoints/{solver}.pt")
     state = state or Path("out/train") / f"{out.stem}.state.pt"
+    if evaluate_subset:
+        if solver == "cliport":
+            metrics = T.evaluate_cliport(out, data_dir, evaluate_subset, device=device, progress=progress)
+        else:
+            metrics = T.evaluate_detector(out, data_dir, evaluate_subset, threshold=threshold, device=device,
+                                          progress=progress)
+        click.echo(json.dumps(metrics))
+        return
     common = dict(max_minutes=max_minutes, resume=resume, state_path=state, device=device, progress=progress)
     if solver == "cliport":
         from opend_mj.learned.affordance import AffordanceConfig

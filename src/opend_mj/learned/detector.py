@@ -158,7 +158,9 @@ class DetectorConfig:
     max_size: int | None = None
     small_anchors: bool = True
     rpn_train_top_n: int = 600  # torchvision: 2000 (pre- and post-NMS proposals while training)
-    box_batch_per_image: int = 128  # torchvision: 512
+    box_batch_per_image: int = 64  # torchvision: 512
+    box_positive_fraction: float = 0.5  # torchvision: 0.25 (handles are few and small)
+    box_score_thresh: float = 0.01  # torchvision: 0.05 (the solver applies its own threshold)
 
 
 def build_detector(config: DetectorConfig = DetectorConfig()):
@@ -188,6 +190,8 @@ def build_detector(config: DetectorConfig = DetectorConfig()):
     model.rpn._pre_nms_top_n["training"] = config.rpn_train_top_n
     model.rpn._post_nms_top_n["training"] = config.rpn_train_top_n
     model.roi_heads.fg_bg_sampler.batch_size_per_image = config.box_batch_per_image
+    model.roi_heads.fg_bg_sampler.positive_fraction = config.box_positive_fraction
+    model.roi_heads.score_thresh = config.box_score_thresh
     if config.box_head_dim != 1024:
         res = model.roi_heads.box_roi_pool.output_size[0]
         model.roi_heads.box_head = fr.TwoMLPHead(model.backbone.out_channels * res * res, config.box_head_dim)
@@ -245,10 +249,11 @@ class FasterRCNNSolver:
     name = "fasterrcnn"
     needs_ground_truth = False
 
-    def __init__(self, checkpoint: Path | str | None = None, threshold: float = 0.8, device: str | None = None,
+    def __init__(self, checkpoint: Path | str | None = None, threshold: float | None = None, device: str | None = None,
                  fallback_to_best: bool = False):
+        """``threshold`` None: the checkpoint's ``threshold`` (0.8, the paper's, unless it says otherwise)."""
         self.model, self.config, self.checkpoint = load_detector(checkpoint, device)
-        self.threshold = float(threshold)
+        self.threshold = float(threshold if threshold is not None else self.checkpoint.get("threshold", 0.8))
         self.fallback_to_best = fallback_to_best
         self.last_detections: tuple[np.ndarray, np.ndarray] | None = None
 

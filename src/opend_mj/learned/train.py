@@ -79,6 +79,8 @@ class _Loop:
         self.history: list[dict] = []
         self.start_epoch = 0
         self.trained_seconds = 0.0
+        self.best: float | None = None
+        self.rebuild_scheduler = False
 
     def resume(self, model, optimiser, scheduler) -> None:
         import torch
@@ -89,25 +91,40 @@ class _Loop:
         st = torch.load(self.state_path, map_location="cpu", weights_only=False)
         model.load_state_dict(st["model"])
         optimiser.load_state_dict(st["optimiser"])
-        if scheduler is not None and st.get("scheduler"):
-            scheduler.load_state_dict(st["scheduler"])
         self.history = st["history"]
         self.start_epoch = st["epoch"] + 1
+        self.best = st.get("best")
+        if scheduler is not None and st.get("scheduler") and st.get("epochs") == self.epochs:
+            scheduler.load_state_dict(st["scheduler"])
+        else:  # more (or fewer) epochs than planned: a fresh one-cycle schedule over the rest
+            self.rebuild_scheduler = True
         self.trained_seconds = st.get("trained_seconds", 0.0)
         self.log(f"resumed from {self.state_path} after epoch {st['epoch'] + 1}")
 
     def out_of_time(self) -> bool:
         return self.deadline is not None and time.time() > self.deadline
 
-    def save(self, epoch: int, model, optimiser, scheduler, payload: dict) -> None:
+    def save(self, epoch: int, model, optimiser, scheduler, payload: dict, metric: str | None = None) -> None:
+        """Training state always; the shipped checkpoint when the validation metric is the best so far."""
         import torch
 
         self.out.parent.mkdir(parents=True, exist_ok=True)
         self.state_path.parent.mkdir(parents=True, exist_ok=True)
+        value = self.history[-1].get(metric) if metric else None
+        improved = value is None or not np.isfinite(value) or self.best is None or value > self.best \
+            or not self.out.is_file()
+        if improved and value is not None and np.isfinite(value):
+            self.best = float(value)
         torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(),
                     "scheduler": scheduler.state_dict() if scheduler is not None else None,
-                    "epoch": epoch, "history": self.history, "trained_seconds": self.trained_seconds},
-                   self.state_path)
+                    "epoch": epoch, "epochs": self.epochs, "history": self.history, "best": self.best,
+                    "trained_seconds": self.trained_seconds}, self.state_path)
+        if not improved:
+            self.log(f"kept {self.out} (best validation {metric} {self.best:.3f})")
+            meta = json.loads(self.out.with_suffix(".json").read_text())
+            meta["history"] = self.history
+            self.out.with_suffix(".json").write_text(json.dumps(meta, indent=1, default=str) + "\n")
+            return
         ckpt = {"solver": self.solver, "model": _half_state(model), "epoch": epoch, "history": self.history,
                 "trained_seconds": round(self.trained_seconds, 1), **payload}
         tmp = self.out.with_suffix(".tmp")
@@ -225,6 +242,11 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     loop = _Loop("cliport", out, state_path, epochs, max_minutes, progress, log)
     if resume:
         loop.resume(model, opt, sched)
+        if loop.rebuild_scheduler:
+            for g in opt.param_groups:
+                g.pop("initial_lr", None), g.pop("max_lr", None), g.pop("min_lr", None)
+            sched = torch.optim.lr_scheduler.OneCycleLR(
+                opt, max_lr=lr, total_steps=max(1, (epochs - loop.start_epoch) * steps_per_epoch), pct_start=0.15)
     bce = torch.nn.BCEWithLogitsLoss(pos_weight=torch.tensor(pos_weight, device=dev))
     val_pairs = _pairs(val_recs, all_targets=True)
     log(f"cliport: {len(train_recs)} train images, {len(val_pairs)} validation targets, device {dev}, "
@@ -273,7 +295,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val centre-in-box {row['val_centre_in_box']:.3f}  ({row['seconds']:.0f} s)")
         loop.save(epoch, model, opt, sched, {"config": asdict(config), "text": text.state(),
-                                             "data": str(data_dir), "pos_weight": pos_weight})
+                                             "data": str(data_dir), "pos_weight": pos_weight},
+                  metric="val_centre_in_box")
         if stopped:
             log(f"stopped: time limit of {max_minutes} min reached")
             break
@@ -394,6 +417,11 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     loop = _Loop("fasterrcnn", out, state_path, epochs, max_minutes, progress, log)
     if resume:
         loop.resume(model, opt, sched)
+        if loop.rebuild_scheduler:
+            for g in opt.param_groups:
+                g.pop("initial_lr", None), g.pop("max_lr", None), g.pop("min_lr", None)
+            sched = torch.optim.lr_scheduler.OneCycleLR(
+                opt, max_lr=lr, total_steps=max(1, (epochs - loop.start_epoch) * steps_per_epoch), pct_start=0.1)
     log(f"fasterrcnn ({config.backbone}): {len(train_recs)} train images, {len(val_recs)} validation images, "
         f"device {dev}, {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters")
     for epoch in range(loop.start_epoch, epochs):
@@ -445,7 +473,8 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val target recall {row.get('val_target_recall', float('nan')):.3f}  "
             f"handle recall {row.get('val_handle_recall', float('nan')):.3f}  ({row['seconds']:.0f} s)")
-        loop.save(epoch, model, opt, sched, {"config": asdict(config), "data": str(data_dir), "threshold": threshold})
+        loop.save(epoch, model, opt, sched, {"config": asdict(config), "data": str(data_dir), "threshold": threshold},
+                  metric="val_target_recall" if "val_target_recall" in row else None)
         if stopped:
             log(f"stopped: time limit of {max_minutes} min reached")
             break
@@ -454,10 +483,13 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     return json.loads(loop.out.with_suffix(".json").read_text())
 
 
-def evaluate_detector(checkpoint: Path, data_dir: Path, subset: str = "val", threshold: float = 0.8,
+def evaluate_detector(checkpoint: Path, data_dir: Path, subset: str = "val", threshold: float | None = None,
                       device: str | None = None, progress: bool = True, limit: int | None = None) -> dict:
+    """Target recall after matching; ``threshold`` None: the checkpoint's (see FasterRCNNSolver)."""
     from opend_mj.learned.detector import load_detector
 
-    model, _, _ = load_detector(checkpoint, device)
+    model, _, ckpt = load_detector(checkpoint, device)
+    if threshold is None:
+        threshold = float(ckpt.get("threshold", 0.8))
     out = evaluate_detector_model(model, Path(data_dir), load_records(data_dir, subset)[:limit], threshold, progress)
     return {"subset": subset, "threshold": threshold, **out}
