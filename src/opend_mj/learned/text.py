@@ -118,3 +118,14 @@ class CachedEncoder:
     @classmethod
     def from_state(cls, state: dict) -> "CachedEncoder":
         return cls(state["name"], state.get("table"), state.get("dim"))
+
+
+def algorithm1_instructions() -> list[str]:
+    """Every instruction Algorithm 1 can produce (vertical x horizontal x kind), for the cache table."""
+    from opend_mj.config import LanguageConfig
+
+    cfg = LanguageConfig()
+    vertical = sorted({w for labels in cfg.vertical_labels.values() for w in labels})
+    horizontal = sorted({w for labels in cfg.horizontal_labels.values() for w in labels})
+    return sorted({" ".join(w for w in (v, h, k) if w) for v in vertical for h in horizontal for k in ("door", "drawer")})
+

@@ -219,7 +219,7 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     from tqdm import tqdm
 
     from opend_mj.learned.affordance import AffordanceConfig, build_model
-    from opend_mj.learned.text import CachedEncoder
+    from opend_mj.learned.text import CachedEncoder, algorithm1_instructions
 
     config = config or AffordanceConfig()
     data_dir = Path(data_dir)
@@ -232,7 +232,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
         raise ValueError(f"{data_dir}: no training images")
     text = CachedEncoder(config.text_encoder)
     instructions = sorted({t["instruction"] for r in train_recs + val_recs for t in r["targets"]})
-    text.encode(instructions + [mirror_instruction(s) for s in instructions])  # cache (saved with the model)
+    # cache (saved with the model): every Algorithm 1 instruction, so inference needs no text encoder
+    text.encode(sorted(set(instructions + [mirror_instruction(s) for s in instructions] + algorithm1_instructions())))
     config = AffordanceConfig(**{**asdict(config), "text_dim": int(text.dim)})
     model = build_model(config).to(dev)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
