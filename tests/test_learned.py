@@ -221,3 +221,18 @@ def test_text_encoders():
     c.encode(["left door"])
     c2 = CachedEncoder.from_state(c.state())
     assert np.allclose(c2.encode(["left door"]), c.encode(["left door"]))
+
+
+def test_pretrained_weights_load_from_a_local_file(tmp_path):
+    import torchvision
+
+    from opend_mj.learned.affordance import AffordanceConfig, build_model
+    from opend_mj.learned.train import load_pretrained
+
+    path = tmp_path / "resnet18.pth"
+    ref = torchvision.models.resnet18(weights=None)
+    torch.save(ref.state_dict(), path)
+    model = build_model(AffordanceConfig(text_encoder="bow", text_dim=17))
+    assert load_pretrained(model, path, "cliport", log=lambda s: None) > 50
+    assert torch.equal(model.layer2[0].conv1.weight, ref.layer2[0].conv1.weight)
+    assert torch.equal(model.stem[0].weight[:, :3], ref.conv1.weight)

@@ -62,9 +62,13 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--evaluate", "evaluate_subset", type=click.Choice(["train", "val", "test"]), default=None,
               help="Do not train: evaluate the checkpoint (--out) on this subset of --data and print the metrics.")
 @click.option("--threshold", type=float, default=None, help="fasterrcnn detection threshold for --evaluate.")
+@click.option("--pretrained", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Local torchvision classification weights for the image stream (resnet18 for cliport, "
+                   "mobilenet_v3_large / resnet50 for fasterrcnn); nothing is downloaded. Default: from scratch.")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
-          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold, progress):
+          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold,
+          pretrained, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
@@ -82,7 +86,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
                                           progress=progress)
         click.echo(json.dumps(metrics))
         return
-    common = dict(max_minutes=max_minutes, resume=resume, state_path=state, device=device, progress=progress)
+    common = dict(pretrained=pretrained, max_minutes=max_minutes, resume=resume, state_path=state, device=device, progress=progress)
     if solver == "cliport":
         from opend_mj.learned.affordance import AffordanceConfig
 

@@ -158,6 +158,37 @@ def plot_history(history: list[dict], out_png: Path, title: str, metric: str) ->
     return Path(out_png)
 
 
+def load_pretrained(model, path: Path, solver: str, log: Callable[[str], None] = print) -> int:
+    """Initialise the image stream from a local torchvision classification state dict (opt-in).
+
+    ``cliport``: a ``resnet18`` state dict (conv1's RGB filters go to the RGB channels, the depth and
+    coordinate channels start at zero). ``fasterrcnn``: a ``mobilenet_v3_large`` or ``resnet50`` state
+    dict, loaded into ``backbone.body``. Keys that do not fit are skipped. Returns the tensors loaded.
+    """
+    import torch
+
+    src = torch.load(path, map_location="cpu", weights_only=False)
+    src = src.get("model", src.get("state_dict", src)) if isinstance(src, dict) else src
+    own = model.state_dict()
+    mapped = {}
+    for k, v in src.items():
+        if solver == "cliport":
+            k2 = {"conv1.weight": "stem.0.weight"}.get(k, k.replace("bn1.", "stem.1.", 1) if k.startswith("bn1.") else k)
+        else:
+            k2 = "backbone.body." + (k[len("features."):] if k.startswith("features.") else k)
+        if k2 not in own:
+            continue
+        if own[k2].shape == v.shape:
+            mapped[k2] = v
+        elif k2 == "stem.0.weight" and v.shape[1] == 3:
+            w = torch.zeros_like(own[k2])
+            w[:, :3] = v
+            mapped[k2] = w
+    model.load_state_dict(mapped, strict=False)
+    log(f"pretrained: {len(mapped)} tensors from {path}")
+    return len(mapped)
+
+
 # --------------------------------------------------------------------------------------------------
 # CLIPort-style affordance model
 # --------------------------------------------------------------------------------------------------
@@ -213,7 +244,7 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                   pos_weight: float = 20.0, max_minutes: float | None = None, resume: bool = False,
                   state_path: Path | None = None, device: str | None = None, progress: bool = True,
                   seed: int = 0, max_train: int | None = None, max_val: int | None = None,
-                  log: Callable[[str], None] = print) -> dict:
+                  pretrained: Path | None = None, log: Callable[[str], None] = print) -> dict:
     """Train the CLIPort-style affordance model; returns the checkpoint's metadata."""
     import torch
     from tqdm import tqdm
@@ -235,7 +266,10 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     # cache (saved with the model): every Algorithm 1 instruction, so inference needs no text encoder
     text.encode(sorted(set(instructions + [mirror_instruction(s) for s in instructions] + algorithm1_instructions())))
     config = AffordanceConfig(**{**asdict(config), "text_dim": int(text.dim)})
-    model = build_model(config).to(dev)
+    model = build_model(config)
+    if pretrained and not resume:
+        load_pretrained(model, pretrained, "cliport", log)
+    model = model.to(dev)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(1, epochs * steps_per_epoch),
@@ -393,7 +427,8 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
                      lr: float = 5e-4, max_minutes: float | None = None, resume: bool = False,
                      state_path: Path | None = None, device: str | None = None, progress: bool = True,
                      seed: int = 0, max_train: int | None = None, max_val: int | None = None,
-                     threshold: float = 0.8, eval_every: int = 1, log: Callable[[str], None] = print) -> dict:
+                     threshold: float = 0.8, eval_every: int = 1, pretrained: Path | None = None,
+                     log: Callable[[str], None] = print) -> dict:
     """Train a Faster R-CNN handle detector; returns the checkpoint's metadata."""
     import torch
     from tqdm import tqdm
@@ -409,7 +444,10 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     val_recs = load_records(data_dir, "val")[:max_val]
     if not train_recs:
         raise ValueError(f"{data_dir}: no training images")
-    model = build_detector(config).to(dev)
+    model = build_detector(config)
+    if pretrained and not resume:
+        load_pretrained(model, pretrained, "fasterrcnn", log)
+    model = model.to(dev)
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(params, lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
