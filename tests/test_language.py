@@ -150,3 +150,24 @@ def test_six_levels_of_drawers_are_fine_when_split_by_type():
 def test_paraphrase(description, expected):
     assert [paraphrase(description, k) for k in range(4)] == expected
     assert paraphrase(description, 4) == expected[0], "templates wrap around"
+
+
+@pytest.mark.parametrize("template", range(4))
+@pytest.mark.parametrize("labels", [("top", "left", "drawer"), ("second bottom", "", "drawer"),
+                                    ("", "right", "door"), ("", "", "door"), ("bottom", "second right", "door")])
+def test_paraphrases_read_back_to_the_same_target(template, labels):
+    """Every paraphrase names the same target: reading it back gives the same labels."""
+    from opend_mj.language import Description, describe_instruction, paraphrase
+
+    d = Description(*labels)
+    text = paraphrase(d, template)
+    assert describe_instruction(text) == d, text
+
+
+def test_paraphrased_episodes_are_their_own_episodes():
+    from opend_mj.evaluation import EpisodeJob, _base
+
+    job = EpisodeJob(cabinet="c", cabinet_dir="x", joint="joint_0", split="test", hand="allegro", solver="oracle")
+    reworded = EpisodeJob(**{**job.__dict__, "paraphrase": 2})
+    assert job.key() != reworded.key()
+    assert "paraphrase" not in _base(job) and _base(reworded)["paraphrase"] == 2

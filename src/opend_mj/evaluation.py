@@ -61,6 +61,8 @@ class EpisodeJob:
     #: From the manifest, so that even an episode that could not run is scored in its column.
     target_type: str | None = None
     instruction: str | None = None
+    #: 0: the Algorithm 1 instruction; k > 0: the k-th paraphrase template (language.PARAPHRASES)
+    paraphrase: int = 0
 
     def key(self) -> tuple:
         return episode_key(asdict(self))
@@ -68,7 +70,8 @@ class EpisodeJob:
 
 def episode_key(record: dict) -> tuple:
     return (str(record["cabinet"]), str(record["joint"]), str(record["hand"]), str(record["solver"]),
-            int(record["seed"]), round(float(record.get("light_scale", 1.0)), 6), str(record.get("pull", "arc")))
+            int(record["seed"]), round(float(record.get("light_scale", 1.0)), 6), str(record.get("pull", "arc")),
+            int(record.get("paraphrase", 0)))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -147,7 +150,8 @@ def _json_default(o):
 # --------------------------------------------------------------------------------------------------
 def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str = "test", seed: int = 0,
               light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
-              video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None) -> list[EpisodeJob]:
+              video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
+              paraphrase: int = 0) -> list[EpisodeJob]:
     from opend_mj.dataset import load_manifest
 
     cabinets_dir = Path(cabinets_dir)
@@ -169,7 +173,8 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
                                    split=cab["split"], hand=hand, solver=solver, seed=seed,
                                    light_scale=light_scale, pull=pull,
                                    video_dir=str(video_dir) if video_dir else None,
-                                   target_type=tgt.get("type"), instruction=tgt.get("instruction")))
+                                   target_type=tgt.get("type"), instruction=tgt.get("instruction"),
+                                   paraphrase=paraphrase))
     return jobs
 
 
@@ -194,6 +199,8 @@ def run_episode(job: EpisodeJob) -> dict:
 
 def _base(job: EpisodeJob) -> dict:
     base = {k: getattr(job, k) for k in _BASE_FIELDS}
+    if job.paraphrase:
+        base["paraphrase"] = job.paraphrase
     for k in ("target_type", "instruction"):
         if getattr(job, k) is not None:
             base[k] = getattr(job, k)
@@ -262,8 +269,16 @@ def _run_episode(job: EpisodeJob) -> dict:
     from opend_mj.solvers import get_solver, needs_ground_truth
     from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
 
+    instruction = None
+    if job.paraphrase:
+        from opend_mj.cabinet import load_cabinet_info
+        from opend_mj.language import Description, paraphrase
+
+        target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
+        instruction = paraphrase(Description(target["vertical"], target["horizontal"], target["type"]),
+                                 job.paraphrase)
     spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
-                          seed=job.seed, room=job.room)
+                          seed=job.seed, room=job.room, instruction=instruction)
     config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
     env = make_environment(spec_ep, config)
     task = env.task

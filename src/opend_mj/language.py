@@ -85,6 +85,28 @@ def describe(targets: list[TargetLayout], config: LanguageConfig = LanguageConfi
     return out
 
 
+def describe_instruction(instruction: str) -> Description:
+    """Read an Algorithm 1 instruction (or a paraphrase of one) back into its labels."""
+    words = [w for w in instruction.lower().replace(",", " ").split() if w]
+    kind = "door" if any(w.startswith("door") for w in words) else "drawer"
+    vertical = horizontal = ""
+    for i, w in enumerate(words):
+        prev = words[i - 1] if i else ""
+        if w in ("top", "bottom"):
+            vertical = f"second {w}" if prev == "second" else w
+        elif w in ("left", "right"):
+            horizontal = f"second {w}" if prev == "second" else w
+        elif w == "middle":
+            # "middle" is vertical unless a vertical word came already or a horizontal word follows
+            nxt = words[i + 1] if i + 1 < len(words) else ""
+            if vertical or nxt in ("door", "drawer", "doors", "drawers") and any(
+                    x in ("top", "bottom") for x in words[:i]):
+                horizontal = "middle"
+            else:
+                vertical = "middle"
+    return Description(vertical=vertical, horizontal=horizontal, kind=kind)
+
+
 #: Paraphrase templates: the same target named in other words (for robustness checks).
 PARAPHRASES = (
     "{instruction}",

@@ -277,9 +277,10 @@ def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance:
 
 
 def target_kind_from_instruction(instruction: str) -> str:
-    words = instruction.strip().lower().split()
-    last = words[-1] if words else ""
-    return "door" if last.startswith("door") else "drawer"
+    """door or drawer, from the instruction's words (Algorithm 1 form or a paraphrase)."""
+    from opend_mj.language import describe_instruction
+
+    return describe_instruction(instruction).kind
 
 
 def _rotz(angle: float) -> np.ndarray:

@@ -52,8 +52,10 @@ def _check_cabinets(ctx, param, value):
               help="Write an MP4 per episode here.")
 @click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
 @click.option("--pull", type=click.Choice(["straight", "arc"]), default="arc", show_default=True)
+@click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True,
+              help="0: the Algorithm 1 instruction; 1-3: reworded ('open the drawer at the top on the left').")
 def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
-        pull):
+        pull, paraphrase):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -65,7 +67,7 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
     jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
-                     limit=limit, video_dir=video_dir)
+                     limit=limit, video_dir=video_dir, paraphrase=paraphrase)
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:

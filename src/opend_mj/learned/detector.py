@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj.config import LanguageConfig
-from opend_mj.language import LanguageInvalid, TargetLayout, describe, levels
+from opend_mj.language import LanguageInvalid, TargetLayout, describe, describe_instruction, levels
 
 BACKBONES = ("resnet50_fpn", "mobilenet_v3_large_fpn", "mobilenet_v3_large_320_fpn")
 DEFAULT_CHECKPOINT = Path("checkpoints/fasterrcnn.pt")
@@ -45,24 +45,8 @@ DEFAULT_CHECKPOINT = Path("checkpoints/fasterrcnn.pt")
 
 def parse_instruction(instruction: str) -> tuple[str, str, str]:
     """(vertical, horizontal, kind) of an Algorithm 1 instruction (paraphrases tolerated)."""
-    words = [w for w in instruction.lower().replace(",", " ").split() if w]
-    kind = "door" if any(w.startswith("door") for w in words) else "drawer"
-    vertical = horizontal = ""
-    for i, w in enumerate(words):
-        prev = words[i - 1] if i else ""
-        if w in ("top", "bottom"):
-            vertical = f"second {w}" if prev == "second" else w
-        elif w in ("left", "right"):
-            horizontal = f"second {w}" if prev == "second" else w
-        elif w == "middle":
-            # "middle" is vertical unless a vertical word came already or a horizontal word follows
-            nxt = words[i + 1] if i + 1 < len(words) else ""
-            if vertical or nxt in ("door", "drawer", "doors", "drawers") and any(
-                    x in ("top", "bottom") for x in words[:i]):
-                horizontal = "middle"
-            else:
-                vertical = "middle"
-    return vertical, horizontal, kind
+    d = describe_instruction(instruction)
+    return d.vertical, d.horizontal, d.kind
 
 
 def _label_index(label: str, n: int, labels: dict[int, tuple[str, ...]]) -> float:
