@@ -88,6 +88,7 @@ def main() -> None:
     args = parser.parse_args()
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
     quick = args.quick
+    load_before = os.getloadavg()
 
     import mujoco
     import numpy
@@ -131,6 +132,11 @@ def main() -> None:
         mem = max(before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                   resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024.0
         body += ["## Episodes", "", text, "", f"Peak memory of one process {mem:.0f} MiB.", ""]
+    load_after = os.getloadavg()
+    header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "
+                      f"on {os.cpu_count()} cores: above about 1, other work shared the cores and the worker "
+                      "scaling figures understate what an idle machine gives.")
+    header.insert(-1, "")
     args.out.write_text("\n".join(header + body) + "\n")
     print(args.out.read_text())
 
