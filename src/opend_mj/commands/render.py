@@ -6,18 +6,13 @@ from pathlib import Path
 
 import click
 
-_cabinets_option = click.option(
-    "--cabinets", "cabinets", type=click.Path(file_okay=False, path_type=Path), default=Path("cabinets"),
-    show_default=True, help="Compiled dataset folder (with manifest.json).")
+from opend_mj.commands.options import cabinets_option, scene_options
 
 
 @click.command("render")
-@_cabinets_option
+@cabinets_option
 @click.option("--cabinet", "cabinet_id", required=True, help="Cabinet id (a folder under --cabinets).")
-@click.option("--target", default=None, help="Target joint (default: the cabinet's first target).")
-@click.option("--hand", default="allegro", show_default=True)
-@click.option("--room", type=click.IntRange(0, 8), default=None, help="Room preset 0-8 (default: from the seed).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@scene_options
 @click.option("--light-scale", type=click.FloatRange(min=0.0), default=1.0, show_default=True)
 @click.option("--size", type=click.IntRange(64, 480), default=384, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("scene.png"), show_default=True)
@@ -40,7 +35,7 @@ def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, ou
 
 
 @click.command("gallery")
-@_cabinets_option
+@cabinets_option
 @click.option("--count", type=click.IntRange(1, 12), default=3, show_default=True, help="Cabinets (rows).")
 @click.option("--rooms", default="0,3,6", show_default=True, help="Comma-separated room presets (columns).")
 @click.option("--hand", default="allegro", show_default=True)

@@ -7,9 +7,7 @@ from pathlib import Path
 
 import click
 
-_cabinets_option = click.option(
-    "--cabinets", "cabinets", type=click.Path(file_okay=False, path_type=Path), default=Path("cabinets"),
-    show_default=True, help="Compiled dataset folder (with manifest.json).")
+from opend_mj.commands.options import cabinets_option, scene_options
 
 
 def _key_help() -> str:
@@ -42,12 +40,9 @@ def _display():
 
 
 @click.command("view")
-@_cabinets_option
+@cabinets_option
 @click.option("--cabinet", "cabinet_id", required=True, help="Cabinet id (a folder under --cabinets).")
-@click.option("--target", default=None, help="Target joint (default: the cabinet's first target).")
-@click.option("--hand", default="allegro", show_default=True)
-@click.option("--room", type=click.IntRange(0, 8), default=None, help="Room preset 0-8 (default: from the seed).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@scene_options
 def view(cabinets, cabinet_id, target, hand, room, seed):
     """MuJoCo's interactive viewer on a task scene; the instruction is shown on screen and printed."""
     _display()
@@ -80,12 +75,9 @@ B profile, START end, BACK reset, shoulders step size.
 
 
 @click.command("teleop", help=_TELEOP_HELP.format(keys=_key_help()))
-@_cabinets_option
+@cabinets_option
 @click.option("--cabinet", "cabinet_id", default=None, help="Cabinet id (one episode; not with --study).")
-@click.option("--target", default=None, help="Target joint (default: the cabinet's first target).")
-@click.option("--hand", default="allegro", show_default=True)
-@click.option("--room", type=click.IntRange(0, 8), default=None, help="Room preset 0-8 (default: from the seed).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@scene_options
 @click.option("--study", type=click.IntRange(min=1), default=None, help="Run a human study of N tasks.")
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("results/human.jsonl"),
