@@ -23,30 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
+from opend_mj.hands import mat_to_quat
+
 HERE = Path(__file__).resolve().parent
 
 
 def mat2quat(m: np.ndarray) -> list[float]:
-    """Rotation matrix -> (w, x, y, z)."""
-    m = np.asarray(m, dtype=float)
-    t = np.trace(m)
-    if t > 0:
-        s = math.sqrt(t + 1.0) * 2
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    if q[0] < 0:
-        q = -q
-    return [round(float(v), 6) for v in q]
+    """Rotation matrix -> (w, x, y, z), rounded for the XML."""
+    return [round(float(v), 6) for v in mat_to_quat(m)]
 
 
 def frame_quat(y_dir, z_dir) -> list[float]:
