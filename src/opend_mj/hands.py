@@ -504,7 +504,6 @@ def build_bar_scene(name: str, orientation: str, bar: BarConfig | None = None):
     bar = bar or BarConfig()
     root, handle = build_scene(name)
     cx, cy, cz = bar.centre
-    plate_x = cx + bar.standoff
     drawer = root.worldbody.add("body", name="drawer", pos=[cx, cy, cz])
     drawer.add("joint", name="drawer_slide", type="slide", axis=[1, 0, 0], range=[-0.4, 0.02],
                damping=bar.damping, frictionloss=bar.frictionloss, armature=0.0)

@@ -317,7 +317,7 @@ def f_wardrobe(rng):
 
 def f_counter(rng, w=None):
     w = w or rng.uniform(1.6, 2.6)
-    hx, hy, h = 0.3, w / 2, 0.9
+    hx, hy = 0.3, w / 2
     parts = [_box((-0.02, 0, 0.45), (hx - 0.02, hy, 0.43), "white"), _box((0, 0, 0.885), (hx, hy, 0.02), "stone")]
     n = max(2, int(w / 0.6))
     dw = w / n

@@ -22,3 +22,19 @@ def scene_options(func):
     for option in (seed_option, room_option, hand_option, target_option):
         func = option(func)
     return func
+
+
+def episode_from_options(cabinets: Path, cabinet_id: str, target: str | None, hand: str, seed: int,
+                         room: int | None):
+    """The EpisodeSpec the scene options name; a usage error for a missing cabinet or target."""
+    from opend_mj.cabinet import CabinetError, load_cabinet_info
+    from opend_mj.task import EpisodeSpec
+
+    try:
+        info = load_cabinet_info(cabinets / cabinet_id)
+    except CabinetError as exc:
+        raise click.UsageError(str(exc)) from exc
+    joints = [t["joint"] for t in info["targets"]]
+    if target is not None and target not in joints:
+        raise click.UsageError(f"cabinet {cabinet_id} has no target {target!r}; targets: {joints}")
+    return EpisodeSpec(cabinets / cabinet_id, target or joints[0], hand, seed=seed, room=room)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from opend_mj.commands.options import cabinets_option, scene_options
+from opend_mj.commands.options import cabinets_option, episode_from_options, scene_options
 
 
 @click.command("render")
@@ -18,18 +18,10 @@ from opend_mj.commands.options import cabinets_option, scene_options
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("scene.png"), show_default=True)
 def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, out):
     """Render one episode's scene: the front camera (handle boxes drawn) beside an overview."""
-    from opend_mj.cabinet import CabinetError, load_cabinet_info
     from opend_mj.render import render_episode_views, save_png
-    from opend_mj.task import EpisodeSpec, TaskConfig
+    from opend_mj.task import TaskConfig
 
-    try:
-        info = load_cabinet_info(cabinets / cabinet_id)
-    except CabinetError as exc:
-        raise click.UsageError(str(exc)) from exc
-    joints = [t["joint"] for t in info["targets"]]
-    if target is not None and target not in joints:
-        raise click.UsageError(f"cabinet {cabinet_id} has no target {target!r}; targets: {joints}")
-    episode = EpisodeSpec(cabinets / cabinet_id, target or joints[0], hand, seed=seed, room=room)
+    episode = episode_from_options(cabinets, cabinet_id, target, hand, seed, room)
     image = render_episode_views(episode, size=size, config=TaskConfig(light_scale=light_scale))
     click.echo(str(save_png(image, out)))
 

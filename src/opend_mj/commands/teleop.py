@@ -7,27 +7,13 @@ from pathlib import Path
 
 import click
 
-from opend_mj.commands.options import cabinets_option, scene_options
+from opend_mj.commands.options import cabinets_option, episode_from_options, scene_options
 
 
 def _key_help() -> str:
     from opend_mj.teleop import KEY_HELP  # light: numpy + hands helpers
 
     return "\n".join(f"  {k:<13} {v}" for k, v in KEY_HELP)
-
-
-def _episode(cabinets: Path, cabinet_id: str, target: str | None, hand: str, seed: int, room: int | None):
-    from opend_mj.cabinet import CabinetError, load_cabinet_info
-    from opend_mj.task import EpisodeSpec
-
-    try:
-        info = load_cabinet_info(cabinets / cabinet_id)
-    except CabinetError as exc:
-        raise click.UsageError(str(exc)) from exc
-    joints = [t["joint"] for t in info["targets"]]
-    if target is not None and target not in joints:
-        raise click.UsageError(f"cabinet {cabinet_id} has no target {target!r}; targets: {joints}")
-    return EpisodeSpec(cabinets / cabinet_id, target or joints[0], hand, seed=seed, room=room)
 
 
 def _display():
@@ -50,7 +36,7 @@ def view(cabinets, cabinet_id, target, hand, room, seed):
     from opend_mj.task import make_environment
     from opend_mj.teleop import teleop_config
 
-    env = make_environment(_episode(cabinets, cabinet_id, target, hand, seed, room), teleop_config())
+    env = make_environment(episode_from_options(cabinets, cabinet_id, target, hand, seed, room), teleop_config())
     try:
         viewer.view(env)
     finally:
@@ -132,7 +118,7 @@ def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, re
         click.echo(f"results appended to {out}")
         return
 
-    episode = _episode(cabinets, cabinet_id, target, hand, seed, room)
+    episode = episode_from_options(cabinets, cabinet_id, target, hand, seed, room)
     env = make_environment(episode, config)
     try:
         recorder = make_recorder() if record else None
