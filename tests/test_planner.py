@@ -128,3 +128,19 @@ def test_hinge_side_from_instruction():
     assert hinge_side_from_instruction("left door") == "left"
     assert hinge_side_from_instruction("door") is None
     assert hinge_side_from_instruction("second left door") is None
+
+
+def test_refine_box_snaps_to_the_handle_in_depth():
+    """A box that misses a handle by a few pixels is moved onto the part that stands out of the panel."""
+    from opend_mj.camera import CameraIntrinsics, CameraView
+    from opend_mj.planner import refine_box_with_depth
+    from opend_mj.solvers import HandleBox
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    depth = np.full((256, 256), 1.0)
+    depth[100:140, 120:124] = 0.96  # a vertical bar 4 cm proud of the panel
+    refined = refine_box_with_depth(HandleBox(127, 105, 133, 135), depth, view)
+    assert (refined.u0, refined.u1, refined.v0, refined.v1) == (120, 124, 100, 140)
+    flat = np.full((256, 256), 1.0)  # nothing stands out: the box is kept
+    assert refine_box_with_depth(HandleBox(127, 105, 133, 135), flat, view) == HandleBox(127, 105, 133, 135)
