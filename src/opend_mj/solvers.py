@@ -71,6 +71,8 @@ class OracleSolver:
 
     name = "oracle"
     needs_ground_truth = True
+    #: its boxes are exact: the planner does not refine them
+    exact = True
 
     def __init__(self, ground_truth: Callable[[], tuple[float, float, float, float] | None] | None = None):
         if ground_truth is None:
