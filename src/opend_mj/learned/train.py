@@ -64,6 +64,15 @@ def _valid_targets(record: dict) -> list[dict]:
     return [t for t in record["targets"] if t["box"] is not None and t.get("mask_pixels", 1) > 0]
 
 
+def _one_cycle(opt, lr: float, total_steps: int, pct_start: float):
+    """A one-cycle learning-rate schedule over `total_steps`; on a resumed optimizer it starts afresh."""
+    import torch
+
+    for g in opt.param_groups:  # a previous schedule's bookkeeping would otherwise be kept
+        g.pop("initial_lr", None), g.pop("max_lr", None), g.pop("min_lr", None)
+    return torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(1, total_steps), pct_start=pct_start)
+
+
 class _Loop:
     """Shared bookkeeping: epochs, time limit, checkpoints, resume, history, progress."""
 
@@ -272,16 +281,12 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     model = model.to(dev)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(1, epochs * steps_per_epoch),
-                                                pct_start=0.15)
+    sched = _one_cycle(opt, lr, epochs * steps_per_epoch, 0.15)
     loop = _Loop("cliport", out, state_path, epochs, max_minutes, progress, log)
     if resume:
         loop.resume(model, opt, sched)
         if loop.rebuild_scheduler:
-            for g in opt.param_groups:
-                g.pop("initial_lr", None), g.pop("max_lr", None), g.pop("min_lr", None)
-            sched = torch.optim.lr_scheduler.OneCycleLR(
-                opt, max_lr=lr, total_steps=max(1, (epochs - loop.start_epoch) * steps_per_epoch), pct_start=0.15)
+            sched = _one_cycle(opt, lr, (epochs - loop.start_epoch) * steps_per_epoch, 0.15)
     bce = torch.nn.BCEWithLogitsLoss(pos_weight=torch.tensor(pos_weight, device=dev))
     val_pairs = _pairs(val_recs, all_targets=True)
     log(f"cliport: {len(train_recs)} train images, {len(val_pairs)} validation targets, device {dev}, "
@@ -451,16 +456,12 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     params = [p for p in model.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(params, lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(1, epochs * steps_per_epoch),
-                                                pct_start=0.1)
+    sched = _one_cycle(opt, lr, epochs * steps_per_epoch, 0.1)
     loop = _Loop("fasterrcnn", out, state_path, epochs, max_minutes, progress, log)
     if resume:
         loop.resume(model, opt, sched)
         if loop.rebuild_scheduler:
-            for g in opt.param_groups:
-                g.pop("initial_lr", None), g.pop("max_lr", None), g.pop("min_lr", None)
-            sched = torch.optim.lr_scheduler.OneCycleLR(
-                opt, max_lr=lr, total_steps=max(1, (epochs - loop.start_epoch) * steps_per_epoch), pct_start=0.1)
+            sched = _one_cycle(opt, lr, (epochs - loop.start_epoch) * steps_per_epoch, 0.1)
     log(f"fasterrcnn ({config.backbone}): {len(train_recs)} train images, {len(val_recs)} validation images, "
         f"device {dev}, {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters")
     for epoch in range(loop.start_epoch, epochs):
