@@ -63,6 +63,8 @@ class EpisodeJob:
     instruction: str | None = None
     #: 0: the Algorithm 1 instruction; k > 0: the k-th paraphrase template (language.PARAPHRASES)
     paraphrase: int = 0
+    #: Physics timestep in seconds; None: TaskConfig's default.
+    physics_timestep: float | None = None
 
     def key(self) -> tuple:
         return episode_key(asdict(self))
@@ -71,7 +73,8 @@ class EpisodeJob:
 def episode_key(record: dict) -> tuple:
     return (str(record["cabinet"]), str(record["joint"]), str(record["hand"]), str(record["solver"]),
             int(record["seed"]), round(float(record.get("light_scale", 1.0)), 6), str(record.get("pull", "arc")),
-            int(record.get("paraphrase", 0)))
+            int(record.get("paraphrase", 0)),
+            None if record.get("physics_timestep") is None else round(float(record["physics_timestep"]), 9))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -201,6 +204,8 @@ def _base(job: EpisodeJob) -> dict:
     base = {k: getattr(job, k) for k in _BASE_FIELDS}
     if job.paraphrase:
         base["paraphrase"] = job.paraphrase
+    if job.physics_timestep is not None:
+        base["physics_timestep"] = job.physics_timestep
     for k in ("target_type", "instruction"):
         if getattr(job, k) is not None:
             base[k] = getattr(job, k)
@@ -280,6 +285,8 @@ def _run_episode(job: EpisodeJob) -> dict:
     spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
                           seed=job.seed, room=job.room, instruction=instruction)
     config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
+    if job.physics_timestep is not None:
+        config = replace(config, physics_timestep=float(job.physics_timestep))
     env = make_environment(spec_ep, config)
     task = env.task
     env.reset()

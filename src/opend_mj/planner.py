@@ -158,6 +158,10 @@ class Robot:
         self.spec: HandSpec = env.task.hand.spec
         self.on_step = on_step
         self.n_steps = 0
+        # Indices read on every control step (physics.bind costs more than a physics substep).
+        self._data = self.physics.data.ptr
+        self._site_id = int(self.physics.bind(self.task.hand.grasp_site).element_id)
+        self._finger_qpos = np.array([int(a) for a in self.physics.bind(self.task.hand.joints).qposadr])
 
     @property
     def control_dt(self) -> float:
@@ -165,14 +169,14 @@ class Robot:
 
     @property
     def time(self) -> float:
-        return float(self.physics.data.time)
+        return float(self._data.time)
 
     def site_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        s = self.physics.bind(self.task.hand.grasp_site)
-        return s.xpos.copy(), mat_to_quat(s.xmat.reshape(3, 3))
+        d = self._data
+        return d.site_xpos[self._site_id].copy(), mat_to_quat(d.site_xmat[self._site_id].reshape(3, 3))
 
     def finger_qpos(self) -> np.ndarray:
-        return np.asarray(self.physics.bind(self.task.hand.joints).qpos, float).copy()
+        return self._data.qpos[self._finger_qpos]
 
     def step(self, site_pos, site_quat, fingers) -> None:
         """One control step toward a grasp-site target pose (converted to the root target)."""

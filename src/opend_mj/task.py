@@ -9,10 +9,12 @@ threshold (20 % by default; drawer delta / drawer length, door angle / 180 degre
 
 from __future__ import annotations
 
+import math
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import collections  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -123,10 +125,12 @@ class OpenCabinetTask(composer.Task):
         self._n_fingers = len(self.hand.actuators)
         self._workspace = (lo - config.workspace_margin, hi + config.workspace_margin)
         self._root_target = None
-        self._path_pos = None
+        self._path_pos = self._path_quat = None
+        self._substep = 0
         self.start_pose = None
         self.set_timesteps(control_timestep=1.0 / config.control_hz, physics_timestep=config.physics_timestep)
         self._substeps = int(round(1.0 / config.control_hz / config.physics_timestep))
+        self._substep_index = np.arange(1, self._substeps + 1, dtype=float)[:, None]
         self._add_observables()
 
     # ------------------------------------------------------------------ composition
@@ -143,7 +147,8 @@ class OpenCabinetTask(composer.Task):
         cached = getattr(self, "_index_cache", None)
         if cached is None or cached[0] is not physics.model.ptr:
             ids = {"hand_qpos": np.array([int(physics.bind(j).qposadr) for j in self.hand.joints]),
-                   "root": physics.model.name2id(self.hand.root_body.full_identifier, "body")}
+                   "root": physics.model.name2id(self.hand.root_body.full_identifier, "body"),
+                   "target_qpos": int(physics.bind(self.cabinet.joint_element(self.target.joint)).qposadr)}
             self._index_cache = cached = (physics.model.ptr, ids)
         return cached[1]
 
@@ -161,7 +166,7 @@ class OpenCabinetTask(composer.Task):
         obs["root_pos"] = observable.Generic(lambda physics: physics.data.xpos[self._index(physics)["root"]].copy())
         obs["root_quat"] = observable.Generic(
             lambda physics: physics.data.xquat[self._index(physics)["root"]].copy())
-        obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.outcome(physics).open_ratio))
+        obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.open_ratio(physics)))
         for name, o in obs.items():
             o.enabled = True  # default schedule: computed once, at the last substep of a control step
             self._task_observables[name] = o
@@ -194,63 +199,87 @@ class OpenCabinetTask(composer.Task):
         action = np.asarray(action, dtype=float)
         if action.shape != (7 + self._n_fingers,):
             raise ValueError(f"action has shape {action.shape}, expected ({7 + self._n_fingers},)")
-        if not np.all(np.isfinite(action)):
+        if not np.isfinite(action).all():
             raise ValueError(f"action has non-finite values: {action}")
         quat = action[3:7]
-        norm = np.linalg.norm(quat)
+        norm = math.sqrt(float(quat @ quat))
         if norm < 1e-6:
             raise ValueError("action quaternion has zero norm")
-        self._root_target = (np.clip(action[:3], *self._workspace), quat / norm)
+        lo, hi = self._workspace
+        self._root_target = (np.minimum(np.maximum(action[:3], lo), hi), quat / norm)
         self._plan_mocap_path(physics)
         lo, hi = self._ctrl_range
-        physics.data.ctrl[self._ctrl_index] = np.clip(action[7:], lo, hi)
+        physics.data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
 
     def _plan_mocap_path(self, physics) -> None:
-        """Mocap poses for each substep of this control step: toward the target at bounded speed."""
+        """Mocap poses for each substep of this control step: toward the target at bounded speed.
+
+        ``_path_pos`` / ``_path_quat`` hold one row per substep, or None where the mocap stays put
+        (position reached / no rotation left), which lets the substep loop skip the writes.
+        """
         data = physics.data
-        pos, quat = data.mocap_pos[self._mocap_id].copy(), data.mocap_quat[self._mocap_id].copy()
+        pos, quat = data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id]
         target_pos, target_quat = self._root_target
-        n = self._substeps
         dt = self.config.physics_timestep
         delta = target_pos - pos
-        dist = float(np.linalg.norm(delta))
-        travel = min(dist, self.config.max_root_speed * dt * n)
-        k = np.arange(1, n + 1)[:, None]
-        step = np.minimum(k * self.config.max_root_speed * dt, travel)
-        self._path_pos = pos + (delta / dist if dist > 1e-12 else 0.0) * step
-        if abs(float(np.dot(quat, target_quat))) > 1.0 - 1e-12:  # no rotation: the common case
-            self._path_quat = [target_quat] * n
+        dist = math.sqrt(float(delta @ delta))
+        if dist > 1e-12:
+            step = np.minimum(self._substep_index * (self.config.max_root_speed * dt), dist)
+            self._path_pos = pos + (delta / dist) * step
         else:
-            self._path_quat = [_slerp_toward(quat, target_quat, self.config.max_root_angular_speed * dt * (i + 1))
-                               for i in range(n)]
+            self._path_pos = None
+        dot = float(quat @ target_quat)
+        if abs(dot) > 1.0 - 1e-12:  # no rotation: the common case
+            self._path_quat = None
+            data.mocap_quat[self._mocap_id] = target_quat
+        else:
+            self._path_quat = _slerp_path(quat, target_quat, self.config.max_root_angular_speed * dt,
+                                          self._substeps)
         self._substep = 0
 
     def before_substep(self, physics, action, random_state):
-        if self._path_pos is None:
-            return
-        i = min(self._substep, len(self._path_pos) - 1)
-        physics.data.mocap_pos[self._mocap_id] = self._path_pos[i]
-        physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
+        i = self._substep
         self._substep += 1
+        if self._path_pos is not None:
+            physics.data.mocap_pos[self._mocap_id] = self._path_pos[i]
+        if self._path_quat is not None:
+            physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
 
     def fast_substeps(self, physics) -> list[str]:
         """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
 
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
-        composer's per-substep Python hooks. Returns the names of MuJoCo instability warnings raised.
+        composer's per-substep Python hooks; where the mocap does not move, the substeps are one
+        ``mj_step(model, data, n)`` call. Afterwards the kinematics (bodies, sites, geoms, cameras,
+        lights) are brought up to date with the new state, so that readers see where things are;
+        this does not change the trajectory (each ``mj_step`` recomputes them first). Returns the
+        names of MuJoCo instability warnings raised in this control step.
         """
-        import mujoco
-
         model, data = physics.model.ptr, physics.data.ptr
-        before = [int(data.warning[w].number) for w in _INSTABILITY_WARNINGS]
-        mocap_pos, mocap_quat, mid = data.mocap_pos, data.mocap_quat, self._mocap_id
-        for i in range(self._substeps):
-            if self._path_pos is not None:
-                mocap_pos[mid] = self._path_pos[i]
-                mocap_quat[mid] = self._path_quat[i]
-            mujoco.mj_step(model, data)
-        mujoco.mj_step1(model, data)  # keep position-dependent fields in sync, as dm_control does
-        return [w.name for w, n in zip(_INSTABILITY_WARNINGS, before) if data.warning[w].number > n]
+        stats = self._warning_stats(data)
+        before = [w.number for w in stats]
+        path_pos, path_quat = self._path_pos, self._path_quat
+        if path_pos is None and path_quat is None:
+            _mujoco.mj_step(model, data, self._substeps)
+        else:
+            mocap_pos, mocap_quat, mid = data.mocap_pos, data.mocap_quat, self._mocap_id
+            for i in range(self._substeps):
+                if path_pos is not None:
+                    mocap_pos[mid] = path_pos[i]
+                if path_quat is not None:
+                    mocap_quat[mid] = path_quat[i]
+                _mujoco.mj_step(model, data)
+        _mujoco.mj_kinematics(model, data)
+        _mujoco.mj_comPos(model, data)
+        _mujoco.mj_camlight(model, data)
+        return [_WARNING_NAMES[i] for i, (w, n) in enumerate(zip(stats, before)) if w.number > n]
+
+    def _warning_stats(self, data) -> list:
+        """Live views of MjData's instability warning counters (cached per MjData)."""
+        cached = getattr(self, "_warning_cache", None)
+        if cached is None or cached[0] is not data:
+            self._warning_cache = cached = (data, [data.warning[int(w)] for w in _INSTABILITY_WARNINGS])
+        return cached[1]
 
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
@@ -260,7 +289,8 @@ class OpenCabinetTask(composer.Task):
         self.hand.set_finger_qpos(physics, self.hand.spec.open_pose)
         self.hand.set_finger_targets(physics, self.hand.spec.open_pose)
         self._root_target = (pos, quat)
-        self._path_pos = None
+        self._path_pos = self._path_quat = None
+        self._substep = 0
         self.physics_warnings: list[dict] = []
         self.start_pose = (pos.copy(), quat.copy())
         self._mocap_id = self.mocap.mocap_id(physics)
@@ -284,8 +314,12 @@ class OpenCabinetTask(composer.Task):
             y += 0.05
         return np.array([x, y, z]), np.asarray(quat, float)
 
+    def open_ratio(self, physics) -> float:
+        """The instructed target's open ratio (what the success checker compares to the threshold)."""
+        return self.target.open_ratio(float(physics.data.qpos[self._index(physics)["target_qpos"]]))
+
     def get_reward(self, physics) -> float:
-        return float(min(1.0, self.outcome(physics).open_ratio / self.config.success_threshold))
+        return float(min(1.0, self.open_ratio(physics) / self.config.success_threshold))
 
     def get_discount(self, physics) -> float:
         return 1.0
@@ -321,38 +355,73 @@ import mujoco as _mujoco  # noqa: E402
 
 _INSTABILITY_WARNINGS = (_mujoco.mjtWarning.mjWARN_BADQACC, _mujoco.mjtWarning.mjWARN_BADQPOS,
                          _mujoco.mjtWarning.mjWARN_BADQVEL)
+_WARNING_NAMES = [w.name for w in _INSTABILITY_WARNINGS]
 
 
 class OpenDEnvironment(composer.Environment):
-    """composer.Environment with the substep loop in one tight loop (no per-substep Python hooks).
+    """composer.Environment with the control step in one tight loop (no per-substep Python hooks).
 
-    The entities of this task have no substep hooks and every observable uses the default schedule
-    (read once, at the last substep), so the result is identical to composer's loop, several times
-    faster. MuJoCo instability warnings are recorded in `task.physics_warnings` and end the episode.
+    The entities of this task have no substep hooks, so running the substeps in
+    `OpenCabinetTask.fast_substeps` gives the same trajectory as composer's loop, several times
+    faster. Where every enabled observable is read once per control step with no buffer, delay or
+    aggregator (the task's own observables are), observations are read directly instead of through
+    composer's observation buffers; the values are the same. The MJCF never changes between episodes
+    of one task, so a reset does not recompile it. MuJoCo instability warnings are recorded in
+    `task.physics_warnings` and end the episode.
     """
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("recompile_mjcf_every_episode", False)
+        super().__init__(*args, **kwargs)
+        # The constructor has just compiled the model and nothing changes it per episode.
+        self._mjcf_never_compiled = self._recompile_mjcf_every_episode
+        self._plain_readers = None
+
+    def reset(self):
+        timestep = super().reset()
+        self._plain_readers = self._make_plain_readers()
+        return timestep
+
+    def _make_plain_readers(self):
+        """(name, callable) per enabled observable if all are plain (see the class doc), else None."""
+        updater = self._observation_updater
+        if updater._is_nested or not self._strip_singleton_obs_buffer_dim:
+            return None
+        readers = []
+        for name, enabled in updater._enabled_structure.items():
+            if (enabled.update_interval != 1 or enabled.delay != 0 or enabled.buffer_size != 1
+                    or enabled.observable.aggregator is not None):
+                return None
+            readers.append((name, enabled.observation_callable))
+        return readers
 
     def step(self, action):
         if self._reset_next_step:
             self._reset_next_step = False
             return self.reset()
-        task = self._task
-        self._hooks.before_step(self._physics_proxy, action, self._random_state)
-        updater = self._observation_updater
-        updater.prepare_for_next_control_step()
-        warnings = task.fast_substeps(self._physics)
-        updater._step_counter += self._n_sub_steps - 1  # the skipped per-substep updates (no-ops)
-        self._hooks.after_step(self._physics_proxy, self._random_state)
-        updater.update()
-        divergent = bool(warnings) or not np.all(np.isfinite(self._physics.data.qpos))
-        if divergent:
-            task.physics_warnings.append({"time": float(self._physics.data.time), "warnings": warnings or ["NaN"]})
+        task, physics, proxy = self._task, self._physics, self._physics_proxy
+        readers = self._plain_readers
+        self._hooks.before_step(proxy, action, self._random_state)
+        if readers is None:
+            updater = self._observation_updater
+            updater.prepare_for_next_control_step()
+        warnings = task.fast_substeps(physics)
+        if readers is None:
+            updater._step_counter += self._n_sub_steps - 1  # the skipped per-substep updates (no-ops)
+        self._hooks.after_step(proxy, self._random_state)
+        if readers is None:
+            updater.update()
+            obs = updater.get_observation()
+        else:
+            obs = collections.OrderedDict((name, np.array(read())) for name, read in readers)
+        data = physics.data.ptr
+        if warnings or not np.isfinite(data.qpos).all():
+            task.physics_warnings.append({"time": float(data.time), "warnings": warnings or ["NaN"]})
             reward, discount, terminating = 0.0, 0.0, True
         else:
-            reward = task.get_reward(self._physics_proxy)
-            discount = task.get_discount(self._physics_proxy)
-            terminating = task.should_terminate_episode(self._physics_proxy) or \
-                self._physics.time() >= self._time_limit
-        obs = updater.get_observation()
+            reward = task.get_reward(proxy)
+            discount = task.get_discount(proxy)
+            terminating = task.should_terminate_episode(proxy) or data.time >= self._time_limit
         if not terminating:
             return dm_env.TimeStep(dm_env.StepType.MID, reward, discount, obs)
         self._reset_next_step = True
@@ -360,18 +429,24 @@ class OpenDEnvironment(composer.Environment):
 
 
 def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.ndarray:
+    """Rotate ``q`` toward ``target`` by at most ``max_angle`` radians (shortest way)."""
+    return _slerp_path(q, target, max_angle, 1)[0]
+
+
+def _slerp_path(q: np.ndarray, target: np.ndarray, step_angle: float, n: int) -> np.ndarray:
+    """``n`` quaternions from ``q`` toward ``target``, the k-th at most k * step_angle away."""
     q = np.asarray(q, float) / np.linalg.norm(q)
     target = np.asarray(target, float) / np.linalg.norm(target)
     dot = float(np.dot(q, target))
     if dot < 0:
         target, dot = -target, -dot
-    angle = 2 * np.arccos(np.clip(dot, -1.0, 1.0))
-    if angle <= max_angle or angle < 1e-9:
-        return target
-    t = max_angle / angle
+    angle = 2 * math.acos(min(1.0, dot))
+    if angle < 1e-9:
+        return np.tile(target, (n, 1))
+    t = np.minimum(np.arange(1, n + 1) * step_angle / angle, 1.0)[:, None]
     half = angle / 2
-    out = (np.sin((1 - t) * half) * q + np.sin(t * half) * target) / np.sin(half)
-    return out / np.linalg.norm(out)
+    out = (np.sin((1 - t) * half) * q + np.sin(t * half) * target) / math.sin(half)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
