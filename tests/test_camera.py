@@ -131,3 +131,27 @@ def test_raw_model_and_data():
         assert cam.render_rgb().std() > 1
     with pytest.raises(ValueError):
         RGBDCamera((m, d), "front", 4096, 4096)
+
+
+def test_shared_context_renderer_gives_mujocos_images(physics):
+    """Renderers share one GL context per process; the images are mujoco.Renderer's, to the bit."""
+    import mujoco
+
+    from opend_mj.camera import RGBDCamera
+
+    model, data = physics.model.ptr, physics.data.ptr
+    for _ in range(2):  # a second renderer on the same (kept) context
+        with RGBDCamera(physics, "front", 128, 128) as cam:
+            rgb, depth = cam.render()
+    ref = mujoco.Renderer(model, height=128, width=128)
+    try:
+        cid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, "front")
+        ref.update_scene(data, camera=cid)
+        rgb_ref = ref.render().copy()
+        ref.enable_depth_rendering()
+        depth_ref = ref.render().copy()
+    finally:
+        ref.close()
+    assert np.array_equal(rgb, rgb_ref)
+    assert np.array_equal(depth, depth_ref)
+    assert rgb.std() > 5  # a real picture, not a cleared buffer

@@ -75,3 +75,17 @@ def test_errors_are_recorded_and_the_pool_goes_on(tmp_path, drawer_cabinet):
     recs = load_results(out)
     assert all("Traceback" in r["error"] and r["success"] is False for r in recs)
     assert len({episode_key(r) for r in recs}) == 3
+
+
+def test_episodes_sharing_a_scene_give_the_records_of_separate_scenes(drawer_cabinet):
+    """`opend run` builds one scene per cabinet and hand; each episode's record must not change."""
+    from opend_mj.evaluation import group_jobs, run_episode, run_episode_group, strip_wall_clock
+
+    joints = [t["joint"] for t in json.loads((drawer_cabinet / "cabinet.json").read_text())["targets"]][:2]
+    jobs = _jobs(drawer_cabinet, joints)
+    groups = group_jobs(jobs)
+    assert [len(g) for g in groups] == [len(jobs)]
+    shared = run_episode_group(groups[0])
+    separate = [run_episode(j) for j in jobs]
+    assert [strip_wall_clock(r) for r in shared] == [strip_wall_clock(r) for r in separate]
+    assert any(r["success"] for r in shared)

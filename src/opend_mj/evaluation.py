@@ -188,16 +188,56 @@ def _box_contains(box, u, v, pad=3.0) -> bool:
     return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
 
 
-def run_episode(job: EpisodeJob) -> dict:
+def run_episode(job: EpisodeJob, env=None) -> dict:
     """Run one episode; returns its record (never raises: errors become an ``error`` record)."""
     t0 = time.perf_counter()
     try:
-        record = _run_episode(job)
+        record = _run_episode(job, env)
     except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
         record = error_record(job, exc)
     out = {**_base(job), **record}
     out["wall_seconds"] = round(time.perf_counter() - t0, 3)
     return out
+
+
+def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[dict]:
+    """Run episodes that share one `scene_key` on one scene, built once (the unit of work of a run).
+
+    Building a scene (room, cabinet, hand, compile) costs about as much as simulating an episode;
+    the episodes of one cabinet's targets differ only in the target and the instruction, and each
+    starts from a full reset, so their records are the same as with a scene each.
+    """
+    records = []
+    env = None
+    for job in jobs:
+        if env is None:
+            t0 = time.perf_counter()
+            try:
+                env = _make_env(job)
+            except Exception as exc:  # noqa: BLE001 (reported per episode; nothing else can run here)
+                records.append({**_base(job), **error_record(job, exc),
+                                "wall_seconds": round(time.perf_counter() - t0, 3)})
+                continue
+            build_s = time.perf_counter() - t0
+            rec = run_episode(job, env)
+            rec["wall_seconds"] = round(rec["wall_seconds"] + build_s, 3)
+        else:
+            rec = run_episode(job, env)
+        records.append(rec)
+        if rec.get("failed_stage") == "physics" or "error" in rec:
+            env = None  # a diverged or failed episode: the next one gets a fresh scene
+    return records
+
+
+def group_jobs(jobs: list[EpisodeJob], max_size: int = 8) -> list[tuple[EpisodeJob, ...]]:
+    """Consecutive jobs with the same `scene_key`, in order, at most ``max_size`` per group."""
+    groups: list[list[EpisodeJob]] = []
+    for job in jobs:
+        if groups and len(groups[-1]) < max_size and scene_key(groups[-1][-1]) == scene_key(job):
+            groups[-1].append(job)
+        else:
+            groups.append([job])
+    return [tuple(g) for g in groups]
 
 
 def _base(job: EpisodeJob) -> dict:
@@ -267,28 +307,47 @@ class _StopAtLast:
         return ts
 
 
-def _run_episode(job: EpisodeJob) -> dict:
+def scene_key(job: EpisodeJob) -> tuple:
+    """Episodes with the same key share one compiled scene (room, cabinet, hand, physics)."""
+    return (job.cabinet_dir, job.hand, job.seed, job.room, round(float(job.light_scale), 6),
+            None if job.physics_timestep is None else round(float(job.physics_timestep), 9))
+
+
+def _instruction_for(job: EpisodeJob) -> str | None:
+    """The job's paraphrased instruction, or None for the target's own (Algorithm 1)."""
+    if not job.paraphrase:
+        return None
+    from opend_mj.cabinet import load_cabinet_info
+    from opend_mj.language import Description, paraphrase
+
+    target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
+    return paraphrase(Description(target["vertical"], target["horizontal"], target["type"]), job.paraphrase)
+
+
+def _make_env(job: EpisodeJob):
+    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+
+    spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
+                          seed=job.seed, room=job.room, instruction=_instruction_for(job))
+    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
+    if job.physics_timestep is not None:
+        config = replace(config, physics_timestep=float(job.physics_timestep))
+    return make_environment(spec_ep, config)
+
+
+def _run_episode(job: EpisodeJob, env=None) -> dict:
+    """One episode. ``env``: a scene built for a job with the same `scene_key` (else a new one)."""
     from opend_mj.camera import RGBDCamera
     from opend_mj.hands import load_spec
     from opend_mj.planner import GraspProfile, Observation, Planner, PlannerConfig, Robot
     from opend_mj.solvers import get_solver, needs_ground_truth
-    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
 
-    instruction = None
-    if job.paraphrase:
-        from opend_mj.cabinet import load_cabinet_info
-        from opend_mj.language import Description, paraphrase
-
-        target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
-        instruction = paraphrase(Description(target["vertical"], target["horizontal"], target["type"]),
-                                 job.paraphrase)
-    spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
-                          seed=job.seed, room=job.room, instruction=instruction)
-    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
-    if job.physics_timestep is not None:
-        config = replace(config, physics_timestep=float(job.physics_timestep))
-    env = make_environment(spec_ep, config)
+    if env is None:
+        env = _make_env(job)
+    else:
+        env.task.set_target(job.joint, _instruction_for(job))
     task = env.task
+    config = task.config
     env.reset()
     physics = env.physics
     target = task.target
@@ -418,6 +477,8 @@ class _VideoRecorder:
     def __init__(self, job: EpisodeJob, physics, config, bounds, every: int = 2, size: int = 256):
         import mujoco
 
+        from opend_mj.camera import make_renderer
+
         self.physics = physics
         self.every = every
         self.frames: list[np.ndarray] = []
@@ -427,7 +488,7 @@ class _VideoRecorder:
         self.fps = int(round(config.control_hz / every))
         m, d = physics.model.ptr, physics.data.ptr
         self._m, self._d = m, d
-        self._renderer = mujoco.Renderer(m, height=size, width=size)
+        self._renderer = make_renderer(m, height=size, width=size)
         self._front = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "front")
         if self._front < 0:
             self._front = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "front/front")
@@ -549,8 +610,11 @@ def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool
             ex = executor if executor is not None else make_executor(backend, workers, address,
                                                                      initializer=_worker_init)
             try:
-                for j, rec, err in ex.imap_unordered(run_episode, runnable):
-                    record(rec if err is None else {**error_record(j, err), "wall_seconds": None})
+                for group, recs, err in ex.imap_unordered(run_episode_group, group_jobs(runnable)):
+                    if err is not None:
+                        recs = [{**error_record(j, err), "wall_seconds": None} for j in group]
+                    for rec in recs:
+                        record(rec)
             finally:
                 if executor is None:
                     ex.close()

@@ -133,6 +133,20 @@ class OpenCabinetTask(composer.Task):
         self._substep_index = np.arange(1, self._substeps + 1, dtype=float)[:, None]
         self._add_observables()
 
+    def set_target(self, joint: str, instruction: str | None = None) -> None:
+        """Another target of the same cabinet (same scene, no recompile); applies from the next reset.
+
+        ``instruction``: None for the target's own instruction (from cabinet.json).
+        """
+        import dataclasses
+
+        self.target = self.cabinet.target(joint)
+        self.episode = dataclasses.replace(self.episode, target_joint=joint, instruction=instruction)
+        self.instruction = instruction or self.target.instruction
+        self.checker = SuccessChecker(self.cabinet, self.target, self.config.success_threshold,
+                                      self.config.moved_threshold)
+        self._index_cache = None
+
     # ------------------------------------------------------------------ composition
     @property
     def root_entity(self):
