@@ -89,3 +89,15 @@ def test_episodes_sharing_a_scene_give_the_records_of_separate_scenes(drawer_cab
     separate = [run_episode(j) for j in jobs]
     assert [strip_wall_clock(r) for r in shared] == [strip_wall_clock(r) for r in separate]
     assert any(r["success"] for r in shared)
+
+
+def test_a_coarser_physics_timestep_is_recorded_and_keyed_apart(drawer_cabinet, tmp_path):
+    """`--physics-timestep 1/120`: the episode runs (4x fewer substeps), says so, and resumes apart."""
+    from opend_mj.evaluation import run_episode
+
+    joint = json.loads((drawer_cabinet / "cabinet.json").read_text())["targets"][0]["joint"]
+    default, coarse = _jobs(drawer_cabinet, [joint]) + _jobs(drawer_cabinet, [joint], physics_timestep=1 / 120)
+    rec = run_episode(coarse)
+    assert rec["physics_timestep"] == pytest.approx(1 / 120)
+    assert rec["success"] and not rec["physics_warnings"]
+    assert episode_key(rec) == coarse.key() != default.key()

@@ -252,6 +252,8 @@ def test_physics_instability_is_recorded(dataset, tmp_path, monkeypatch):
     (["run", "--cabinets", "{tmp}"], "no manifest.json"),
     (["run", "--backend", "spark"], "spark"),
     (["run", "--address", "auto"], "--address needs --backend ray"),
+    (["run", "--physics-timestep", "1/100"], "whole number of substeps"),
+    (["run", "--physics-timestep", "zero"], "--physics-timestep"),
     (["build-assets", "--scale", "0"], "--scale"),
     (["build-assets", "--workers", "0"], "--workers"),
     (["build-assets", "--address", "auto", "--out", "{tmp}"], "--address needs --backend ray"),

@@ -154,7 +154,7 @@ def _json_default(o):
 def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str = "test", seed: int = 0,
               light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
               video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
-              paraphrase: int = 0) -> list[EpisodeJob]:
+              paraphrase: int = 0, physics_timestep: float | None = None) -> list[EpisodeJob]:
     from opend_mj.dataset import load_manifest
 
     cabinets_dir = Path(cabinets_dir)
@@ -177,7 +177,7 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
                                    light_scale=light_scale, pull=pull,
                                    video_dir=str(video_dir) if video_dir else None,
                                    target_type=tgt.get("type"), instruction=tgt.get("instruction"),
-                                   paraphrase=paraphrase))
+                                   paraphrase=paraphrase, physics_timestep=physics_timestep))
     return jobs
 
 

@@ -28,6 +28,7 @@ Quaternions are (w, x, y, z) as in MuJoCo.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 from dataclasses import dataclass, field
@@ -240,11 +241,18 @@ def orientation_for_handle(orientation: str, approach=(1.0, 0.0, 0.0)) -> np.nda
     return mat_to_quat(np.column_stack([x, y, z]))
 
 
+@functools.lru_cache(maxsize=64)
+def _site_offset_rotation_t(grasp_site_quat: tuple) -> np.ndarray:
+    """Transpose of the site's rotation in the root frame (read-only; cached per hand)."""
+    r = quat_to_mat(grasp_site_quat).T.copy()
+    r.flags.writeable = False
+    return r
+
+
 def grasp_pose_to_root_pose(spec: HandSpec, site_pos, site_quat) -> tuple[np.ndarray, np.ndarray]:
     """Root (= mocap) pose that puts the grasp site at ``site_pos`` with orientation ``site_quat``."""
     r_site = quat_to_mat(site_quat)
-    r_off = quat_to_mat(spec.grasp_site_quat)  # site orientation in the root frame
-    r_root = r_site @ r_off.T
+    r_root = r_site @ _site_offset_rotation_t(tuple(float(x) for x in spec.grasp_site_quat))
     root_pos = np.asarray(site_pos, float) - r_root @ np.asarray(spec.grasp_site_pos, float)
     return root_pos, mat_to_quat(r_root)
 

@@ -175,6 +175,10 @@ class Robot:
         d = self._data
         return d.site_xpos[self._site_id].copy(), mat_to_quat(d.site_xmat[self._site_id].reshape(3, 3))
 
+    def site_pos(self) -> np.ndarray:
+        """Where the grasp site is (the position of `site_pose`, without the orientation)."""
+        return self._data.site_xpos[self._site_id].copy()
+
     def finger_qpos(self) -> np.ndarray:
         return self._data.qpos[self._finger_qpos]
 
@@ -510,7 +514,7 @@ class Planner:
         grip = robot.finger_qpos()  # the fingers as they closed on the handle
         grip_tolerance = cfg.grip_lost_change.get(self.spec.hand_type)
         for k in range(max_steps):
-            site, _ = robot.site_pose()
+            site = robot.site_pos()
             if grip_tolerance is not None and float(np.max(np.abs(robot.finger_qpos() - grip))) > grip_tolerance:
                 # the handle forced the fingers open: the grip is lost. Stop here rather than keep
                 # moving a hand that no longer holds anything (it would push the door shut again).
@@ -530,7 +534,8 @@ class Planner:
                         lateral = math.sqrt(max(1e-9, 1 - cand[0] ** 2))
                         cand[1] = math.copysign(lateral, cand[1] if abs(cand[1]) > 1e-9 else 1.0)
                         cand = cand / np.linalg.norm(cand)
-                    ang = math.degrees(math.atan2(np.cross(base_dir, cand)[2], float(base_dir @ cand)))
+                    ang = math.degrees(math.atan2(base_dir[0] * cand[1] - base_dir[1] * cand[0],
+                                                  float(base_dir @ cand)))
                     if abs(ang) <= cfg.door_max_turn:
                         direction = cand
                         turned = ang

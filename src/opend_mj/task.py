@@ -51,6 +51,15 @@ class TaskConfig:
     workspace_margin: float = 1.5
     enable_rgbd: bool = True
 
+    def __post_init__(self):
+        if not (self.control_hz > 0 and self.physics_timestep > 0):
+            raise ValueError(f"control_hz and physics_timestep must be positive, not {self.control_hz}, "
+                             f"{self.physics_timestep}")
+        substeps = 1.0 / self.control_hz / self.physics_timestep
+        if substeps < 1 - 1e-6 or abs(substeps - round(substeps)) > 1e-6:
+            raise ValueError(f"physics_timestep {self.physics_timestep:g} s must divide the control step "
+                             f"1/{self.control_hz:g} s into a whole number of substeps (e.g. 1/480, 1/240, 1/120)")
+
 
 @dataclass(frozen=True)
 class EpisodeSpec:

@@ -25,6 +25,22 @@ def _check_solver(ctx, param, value):
     return value
 
 
+def _check_timestep(ctx, param, value):
+    """A physics timestep such as 1/480 or 0.002, dividing the 60 Hz control step evenly (or None)."""
+    if value is None:
+        return None
+    from fractions import Fraction
+
+    from opend_mj.task import TaskConfig
+
+    try:
+        seconds = float(Fraction(value.strip()))
+        TaskConfig(physics_timestep=seconds)
+    except (ValueError, ZeroDivisionError) as exc:
+        raise click.BadParameter(f"{value!r}: {exc}", ctx, param) from None
+    return seconds
+
+
 def _check_cabinets(ctx, param, value):
     if not (Path(value) / "manifest.json").is_file():
         raise click.BadParameter(f"{value}: no manifest.json here; run `opend build-assets --out {value}` first",
@@ -54,8 +70,11 @@ def _check_cabinets(ctx, param, value):
 @click.option("--pull", type=click.Choice(["straight", "arc"]), default="arc", show_default=True)
 @click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True,
               help="0: the Algorithm 1 instruction; 1-3: reworded ('open the drawer at the top on the left').")
+@click.option("--physics-timestep", "physics_timestep", default=None, callback=_check_timestep,
+              help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
+                   "see BENCHMARKS.md for success and penetration at each.")
 def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
-        pull, paraphrase):
+        pull, paraphrase, physics_timestep):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -67,7 +86,7 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
     jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
-                     limit=limit, video_dir=video_dir, paraphrase=paraphrase)
+                     limit=limit, video_dir=video_dir, paraphrase=paraphrase, physics_timestep=physics_timestep)
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
