@@ -139,7 +139,10 @@ class OpenCabinetTask(composer.Task):
         self.start_pose = None
         self.set_timesteps(control_timestep=1.0 / config.control_hz, physics_timestep=config.physics_timestep)
         self._substeps = int(round(1.0 / config.control_hz / config.physics_timestep))
-        self._substep_index = np.arange(1, self._substeps + 1, dtype=float)[:, None]
+        #: Distance the mocap may have travelled by the end of each substep (bounded speed).
+        self._substep_travel = np.arange(1, self._substeps + 1, dtype=float)[:, None] * (
+            config.max_root_speed * config.physics_timestep)
+        self._action_shape = (7 + self._n_fingers,)
         self._add_observables()
 
     def set_target(self, joint: str, instruction: str | None = None) -> None:
@@ -175,6 +178,16 @@ class OpenCabinetTask(composer.Task):
             self._index_cache = cached = (physics.model.ptr, ids)
         return cached[1]
 
+    def _cache_state(self, physics) -> None:
+        """Raw MjData and the indices read on every control step (physics.bind on every step costs
+        more than a physics substep). Refreshed after each compile and at each episode start."""
+        ids = self._index(physics)
+        self._data = physics.data.ptr
+        self._hand_qpos, self._root_id, self._target_qpos = ids["hand_qpos"], ids["root"], ids["target_qpos"]
+
+    def after_compile(self, physics, random_state):
+        self._cache_state(physics)
+
     def _add_observables(self) -> None:
         size = self.config.image_size
         obs = {}
@@ -182,13 +195,9 @@ class OpenCabinetTask(composer.Task):
             obs["rgb"] = observable.MJCFCamera(self.camera, width=size, height=size)
             obs["depth"] = observable.MJCFCamera(self.camera, width=size, height=size, depth=True)
         obs["instruction"] = observable.Generic(lambda physics: np.array(self.instruction))
-        # Plain index reads (ids cached at episode start): physics.bind on every step costs more
-        # than the physics of a control step's worth of substeps.
-        obs["hand_joint_pos"] = observable.Generic(
-            lambda physics: physics.data.qpos[self._index(physics)["hand_qpos"]].copy())
-        obs["root_pos"] = observable.Generic(lambda physics: physics.data.xpos[self._index(physics)["root"]].copy())
-        obs["root_quat"] = observable.Generic(
-            lambda physics: physics.data.xquat[self._index(physics)["root"]].copy())
+        obs["hand_joint_pos"] = observable.Generic(lambda physics: self._data.qpos[self._hand_qpos])
+        obs["root_pos"] = observable.Generic(lambda physics: self._data.xpos[self._root_id].copy())
+        obs["root_quat"] = observable.Generic(lambda physics: self._data.xquat[self._root_id].copy())
         obs["open_ratio"] = observable.Generic(lambda physics: np.array(self.open_ratio(physics)))
         for name, o in obs.items():
             o.enabled = True  # default schedule: computed once, at the last substep of a control step
@@ -220,9 +229,9 @@ class OpenCabinetTask(composer.Task):
 
     def before_step(self, physics, action, random_state):
         action = np.asarray(action, dtype=float)
-        if action.shape != (7 + self._n_fingers,):
-            raise ValueError(f"action has shape {action.shape}, expected ({7 + self._n_fingers},)")
-        if not np.isfinite(action).all():
+        if action.shape != self._action_shape:
+            raise ValueError(f"action has shape {action.shape}, expected {self._action_shape}")
+        if not math.isfinite(float(action @ action)) and not np.isfinite(action).all():  # dot: the fast test
             raise ValueError(f"action has non-finite values: {action}")
         quat = action[3:7]
         norm = math.sqrt(float(quat @ quat))
@@ -230,33 +239,31 @@ class OpenCabinetTask(composer.Task):
             raise ValueError("action quaternion has zero norm")
         lo, hi = self._workspace
         self._root_target = (np.minimum(np.maximum(action[:3], lo), hi), quat / norm)
-        self._plan_mocap_path(physics)
+        self._plan_mocap_path()
         lo, hi = self._ctrl_range
-        physics.data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
+        self._data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
 
-    def _plan_mocap_path(self, physics) -> None:
+    def _plan_mocap_path(self) -> None:
         """Mocap poses for each substep of this control step: toward the target at bounded speed.
 
         ``_path_pos`` / ``_path_quat`` hold one row per substep, or None where the mocap stays put
         (position reached / no rotation left), which lets the substep loop skip the writes.
         """
-        data = physics.data
-        pos, quat = data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id]
+        data, mid = self._data, self._mocap_id
+        pos, quat = data.mocap_pos[mid], data.mocap_quat[mid]
         target_pos, target_quat = self._root_target
-        dt = self.config.physics_timestep
         delta = target_pos - pos
         dist = math.sqrt(float(delta @ delta))
         if dist > 1e-12:
-            step = np.minimum(self._substep_index * (self.config.max_root_speed * dt), dist)
-            self._path_pos = pos + (delta / dist) * step
+            self._path_pos = pos + (delta / dist) * np.minimum(self._substep_travel, dist)
         else:
             self._path_pos = None
-        dot = float(quat @ target_quat)
-        if abs(dot) > 1.0 - 1e-12:  # no rotation: the common case
+        if abs(float(quat @ target_quat)) > 1.0 - 1e-12:  # no rotation: the common case
             self._path_quat = None
-            data.mocap_quat[self._mocap_id] = target_quat
+            data.mocap_quat[mid] = target_quat
         else:
-            self._path_quat = _slerp_path(quat, target_quat, self.config.max_root_angular_speed * dt,
+            self._path_quat = _slerp_path(quat, target_quat,
+                                          self.config.max_root_angular_speed * self.config.physics_timestep,
                                           self._substeps)
         self._substep = 0
 
@@ -306,6 +313,7 @@ class OpenCabinetTask(composer.Task):
 
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
+        self._cache_state(physics)
         self.cabinet.close_all(physics)
         pos, quat = self.initial_root_pose(physics)
         self.mocap.reset_pose(physics, pos, quat)
@@ -339,7 +347,9 @@ class OpenCabinetTask(composer.Task):
 
     def open_ratio(self, physics) -> float:
         """The instructed target's open ratio (what the success checker compares to the threshold)."""
-        return self.target.open_ratio(float(physics.data.qpos[self._index(physics)["target_qpos"]]))
+        if physics.data.ptr is not self._data:  # not this task's current physics
+            return self.target.open_ratio(float(physics.data.qpos[self._index(physics)["target_qpos"]]))
+        return self.target.open_ratio(float(self._data.qpos[self._target_qpos]))
 
     def get_reward(self, physics) -> float:
         return float(min(1.0, self.open_ratio(physics) / self.config.success_threshold))
@@ -438,7 +448,7 @@ class OpenDEnvironment(composer.Environment):
         else:
             obs = collections.OrderedDict((name, np.array(read())) for name, read in readers)
         data = physics.data.ptr
-        if warnings or not np.isfinite(data.qpos).all():
+        if warnings or (not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all()):
             task.physics_warnings.append({"time": float(data.time), "warnings": warnings or ["NaN"]})
             reward, discount, terminating = 0.0, 0.0, True
         else:
