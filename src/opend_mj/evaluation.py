@@ -386,7 +386,14 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
             probes["t_pull"] = float(physics.data.time)
 
     video = _VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
-    robot = Robot(_StopAtLast(env), on_step=video.capture if video else None)
+    penetration = _PenetrationProbe(physics.data.ptr)
+
+    def on_step():
+        penetration()
+        if video:
+            video.capture()
+
+    robot = Robot(_StopAtLast(env), on_step=on_step)
     overrides = dict(job.planner_overrides)
     pconfig = replace(PlannerConfig(pull=job.pull))
     grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
@@ -440,6 +447,7 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         "pulled": round(plan.pulled, 4),
         "turned_deg": round(plan.turned_deg, 2),
         "sim_seconds": round(float(physics.data.time), 3),
+        "max_penetration_mm": round(penetration.deepest * 1000, 2),
         "physics_warnings": list(warnings),
         "video": str(video.path) if video else None,
     }
@@ -469,6 +477,21 @@ def _diverged_record(job, task, physics, instruction, gt_box, warnings, reason) 
         "failure_reason": reason,
         "video": None,
     }
+
+
+class _PenetrationProbe:
+    """Deepest contact penetration seen at the end of any control step (metres): how soft the
+    contacts are in practice (a coarser physics timestep makes them softer)."""
+
+    def __init__(self, data):
+        self._data = data
+        self.deepest = 0.0
+
+    def __call__(self) -> None:
+        if self._data.ncon:
+            deepest = -float(self._data.contact.dist.min())
+            if deepest > self.deepest:
+                self.deepest = deepest
 
 
 class _VideoRecorder:
