@@ -3,9 +3,11 @@
 Sections (each a subprocess, so that its peak memory can be read):
   assets  - tools/bench_assets.py: build seconds per cabinet cold / cached, hulls, mj_step of cabinets
   hands   - tools/bench_hands.py: steps/s of each hand alone and grasping
-  task    - tools/bench_task.py: Task control steps/s vs raw mj_step (ratio), RGB / depth frames/s
-  episodes- here: full oracle episodes without rendering (real-time factor), episodes/min with 1 and 2
-            workers (scaling), solver inference ms per image
+  task    - tools/bench_task.py: recorded episodes through the Task vs raw mj_step (ratio), real-time
+            factors of the Task, the episode loop and whole episodes, RGB / depth frames/s; at the
+            default physics timestep (1/480 s) and at 1/120 s
+  episodes- here: episodes/min with 1 and 2 workers (scaling); success, contact penetration and speed
+            at three physics timesteps; handle solver inference ms per image
 
     python tools/bench.py [--quick] [--sections assets,hands,task,episodes] [--out BENCHMARKS.md]
 """
@@ -22,6 +24,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import opend_mj  # noqa: E402,F401  (off-screen EGL before mujoco loads)
@@ -50,33 +53,88 @@ def _tables(text: str) -> str:
     return "\n".join(keep)
 
 
+def _run_timed(jobs, workers: int) -> tuple[list[dict], float]:
+    from opend_mj.evaluation import load_results, run_jobs
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "r.jsonl"
+        start = time.perf_counter()
+        run_jobs(jobs, out, workers=workers, progress=False)
+        seconds = time.perf_counter() - start
+        return load_results(out), seconds
+
+
 def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
-    """Oracle episodes (allegro) with 1 and 2 workers; real-time factor and inference time."""
-    from opend_mj.evaluation import load_results, make_jobs, run_jobs
+    """Oracle episodes (allegro): workers scaling, physics timesteps, solver inference."""
+    from opend_mj.evaluation import make_jobs
 
     jobs = make_jobs(cabinets, ["allegro"], "oracle", split="test", limit=n_episodes)
     rates = {1: [], 2: []}
-    rtf = []
     for workers in (1, 2):
         for _ in range(repeats):
-            with tempfile.TemporaryDirectory() as tmp:
-                out = Path(tmp) / "r.jsonl"
-                start = time.perf_counter()
-                run_jobs(jobs, out, workers=workers, progress=False)
-                minutes = (time.perf_counter() - start) / 60
-                records = load_results(out)
-            rates[workers].append(len(records) / minutes)
-            if workers == 1:
-                rtf += [r["sim_seconds"] / r["wall_seconds"] for r in records if r.get("wall_seconds")]
+            records, seconds = _run_timed(jobs, workers)
+            rates[workers].append(len(records) / seconds * 60)
     med1, med2 = statistics.median(rates[1]), statistics.median(rates[2])
     lines = [f"Oracle episodes, allegro, first {len(jobs)} test targets, median of {repeats} runs each "
-             "(an episode includes building the scene: room, cabinet, hand).", "",
+             "(everything `opend run` does: scene build, the one RGB-D frame, the planner; episodes of one "
+             "cabinet share its scene).", "",
              "| figure | value |", "|---|---:|",
              f"| episodes/min, 1 worker | {med1:.1f} |",
              f"| episodes/min, 2 workers | {med2:.1f} |",
-             f"| scaling 2 workers / 1 | {med2 / med1:.2f}x |",
-             f"| real-time factor of a whole episode (sim s / wall s, no rendering) | {statistics.median(rtf):.1f}x |"]
+             f"| scaling 2 workers / 1 | {med2 / med1:.2f}x |", ""]
+
+    lines += ["### Physics timestep: speed against contact softness", "",
+              f"The same {len(jobs)} oracle episodes (allegro, 1 worker) at three physics timesteps "
+              "(`opend run --physics-timestep`). MuJoCo keeps a contact's time constant at least two "
+              "timesteps, so coarser steps make the contacts softer: the penetration columns show how much.", "",
+              "| physics timestep | substeps / control step | successes | episodes/min | real-time factor, "
+              "whole episode | median of max penetration, mm | worst penetration, mm |",
+              "|---|---:|---:|---:|---:|---:|---:|"]
+    for denominator in (480, 240, 120):
+        tjobs = [replace(j, physics_timestep=None if denominator == 480 else 1 / denominator) for j in jobs]
+        records, seconds = _run_timed(tjobs, 1)
+        pen = [r["max_penetration_mm"] for r in records if r.get("max_penetration_mm") is not None]
+        sim = sum(r.get("sim_seconds") or 0 for r in records)
+        default = " (default)" if denominator == 480 else ""
+        lines.append(f"| 1/{denominator} s{default} | {denominator // 60} "
+                     f"| {sum(bool(r.get('success')) for r in records)} / {len(records)} "
+                     f"| {len(records) / seconds * 60:.0f} | {sim / seconds:.1f}x "
+                     f"| {statistics.median(pen):.2f} | {max(pen):.2f} |")
+    lines.append("")
+    lines += _inference_lines(cabinets)
     return "\n".join(lines)
+
+
+def _inference_lines(cabinets: Path) -> list[str]:
+    """Milliseconds per image of each shipped learned solver (CPU), on one rendered test image."""
+    from opend_mj.camera import RGBDCamera
+    from opend_mj.dataset import load_manifest
+    from opend_mj.solvers import get_solver
+    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+
+    cab, tgt = load_manifest(cabinets).targets("test")[0]
+    env = make_environment(EpisodeSpec(cabinets / cab["path"], tgt["joint"], "allegro"), TaskConfig(enable_rgbd=False))
+    env.reset()
+    with RGBDCamera(env.physics, "front", 256, 256) as cam:
+        rgb, depth = cam.render()
+    view = env.task.camera_view(env.physics)
+    rows = ["### Handle solver inference (CPU, 256 x 256, one image at a time)", "",
+            "| solver | ms per image (median of 10, after one warm-up) |", "|---|---:|"]
+    for name in ("cliport", "fasterrcnn"):
+        try:
+            solver = get_solver(name)
+        except Exception as exc:  # noqa: BLE001 (no checkpoint: say so, do not fail the benchmark)
+            rows.append(f"| {name} | unavailable: {exc} |")
+            continue
+        solver.solve(rgb, depth, env.task.instruction, view)
+        times = []
+        for _ in range(10):
+            start = time.perf_counter()
+            solver.solve(rgb, depth, env.task.instruction, view)
+            times.append((time.perf_counter() - start) * 1000)
+        rows.append(f"| {name} | {statistics.median(times):.0f} |")
+    env.close()
+    return rows
 
 
 def main() -> None:
@@ -123,9 +181,12 @@ def main() -> None:
         out, secs, mem = _run(["tools/bench_hands.py", "--seconds", "2" if quick else "4"])
         body += ["## Hands", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
     if "task" in sections:
-        out, secs, mem = _run(["tools/bench_task.py", "--cabinets", str(args.cabinets), "--count",
-                               "3" if quick else "8", "--seconds", "2" if quick else "4"])
-        body += ["## Task", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
+        body += ["## Task", ""]
+        for timestep in ("1/480", "1/120"):
+            out, secs, mem = _run(["tools/bench_task.py", "--cabinets", str(args.cabinets), "--count",
+                                   "3" if quick else "8", "--timestep", timestep])
+            body += [_tables(out), ""]
+        body += [f"Peak memory {mem:.0f} MiB.", ""]
     if "episodes" in sections:
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         text = episodes_section(args.cabinets, 6 if quick else 16, 1 if quick else 3)

@@ -71,12 +71,12 @@ def _plan_episode(env, hand: str):
     mocap_quat = np.empty((len(actions), n_sub, 4))
     env.reset()
     mid = task._mocap_id
-    cur_pos, cur_quat = physics.data.mocap_pos[mid].copy(), physics.data.mocap_quat[mid].copy()
+    cur_pos = physics.data.mocap_pos[mid].copy()
     for k, (pos, quat) in enumerate(paths):
         root_quat = actions[k][3:7] / np.linalg.norm(actions[k][3:7])
         mocap_pos[k] = pos if pos is not None else cur_pos
         mocap_quat[k] = quat if quat is not None else root_quat
-        cur_pos, cur_quat = mocap_pos[k, -1].copy(), mocap_quat[k, -1].copy()
+        cur_pos = mocap_pos[k, -1].copy()
     return actions, np.array(ctrls), mocap_pos, mocap_quat, loop_s
 
 
