@@ -12,3 +12,32 @@ import sys as _sys
 
 if "triton" not in _sys.modules and not _os.environ.get("OPEND_ALLOW_TRITON"):
     _sys.modules["triton"] = None  # type: ignore[assignment]
+
+
+_LOADED: dict = {}
+
+
+def load_checkpoint(checkpoint, default, what: str, train_command: str, build, device=None):
+    """``(model in eval mode on device, config, checkpoint dict)``, cached per path and device.
+
+    ``build(ckpt) -> (model, config)`` makes the untrained model from the checkpoint's config; the
+    weights are loaded here (as float32). A missing file is a clear error naming the file and the
+    command that makes one.
+    """
+    from pathlib import Path
+
+    import torch
+
+    path = Path(checkpoint) if checkpoint is not None else Path(default)
+    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    key = (str(path.resolve()), device, what)
+    if key not in _LOADED:
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no {what} checkpoint; train one with `{train_command}` "
+                                    "(or pass checkpoint=)")
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        model, config = build(ckpt)
+        model.load_state_dict({k: v.float() for k, v in ckpt["model"].items()})
+        model.eval().to(device)
+        _LOADED[key] = (model, config, ckpt)
+    return _LOADED[key]

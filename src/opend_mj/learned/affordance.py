@@ -197,29 +197,23 @@ def map_to_box(prob: np.ndarray, rel: float = 0.5, min_box: float = 4.0):
 # Checkpoints and the solver
 # --------------------------------------------------------------------------------------------------
 
-_MODELS: dict = {}
+_TEXT_ENCODERS: dict = {}
 
 
 def load_affordance(checkpoint: Path | str | None = None, device: str | None = None):
     """(model in eval mode, config, text encoder, checkpoint dict), cached per path and device."""
-    torch, _, _ = _torch()
+    from opend_mj.learned import load_checkpoint
     from opend_mj.learned.text import CachedEncoder
 
-    path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINT
-    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
-    key = (str(path.resolve()), device)
-    if key not in _MODELS:
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no CLIPort checkpoint; train one with "
-                                    "`opend train --solver cliport` (or pass checkpoint=)")
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    def build(ckpt):
         config = AffordanceConfig(**ckpt["config"])
-        model = build_model(config)
-        model.load_state_dict({k: v.float() for k, v in ckpt["model"].items()})
-        model.eval().to(device)
-        text = CachedEncoder.from_state(ckpt["text"])
-        _MODELS[key] = (model, config, text, ckpt)
-    return _MODELS[key]
+        return build_model(config), config
+
+    model, config, ckpt = load_checkpoint(checkpoint, DEFAULT_CHECKPOINT, "CLIPort",
+                                          "opend train --solver cliport", build, device)
+    if id(ckpt) not in _TEXT_ENCODERS:  # one encoder per loaded (and kept) checkpoint
+        _TEXT_ENCODERS[id(ckpt)] = CachedEncoder.from_state(ckpt["text"])
+    return model, config, _TEXT_ENCODERS[id(ckpt)], ckpt
 
 
 def predict(model, config: AffordanceConfig, text, rgb, depth, instruction: str) -> np.ndarray:

@@ -193,27 +193,16 @@ def detector_targets(record: dict, device=None) -> dict:
     return {"boxes": b, "labels": torch.ones(len(b), dtype=torch.int64, device=device)}
 
 
-_MODELS: dict = {}
-
-
 def load_detector(checkpoint: Path | str | None = None, device: str | None = None):
-    """(model in eval mode, config) from a checkpoint (cached per path and device)."""
-    import torch
+    """(model in eval mode, config, checkpoint dict) from a checkpoint (cached per path and device)."""
+    from opend_mj.learned import load_checkpoint
 
-    path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINT
-    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
-    key = (str(path.resolve()), device)
-    if key not in _MODELS:
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no detector checkpoint; train one with "
-                                    "`opend train --solver fasterrcnn` (or pass checkpoint=)")
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    def build(ckpt):
         config = DetectorConfig(**ckpt["config"])
-        model = build_detector(config)
-        model.load_state_dict({k: v.float() for k, v in ckpt["model"].items()})
-        model.eval().to(device)
-        _MODELS[key] = (model, config, ckpt)
-    return _MODELS[key]
+        return build_detector(config), config
+
+    return load_checkpoint(checkpoint, DEFAULT_CHECKPOINT, "detector", "opend train --solver fasterrcnn", build,
+                           device)
 
 
 def detect(model, rgb: np.ndarray, device=None) -> tuple[np.ndarray, np.ndarray]:
