@@ -842,6 +842,15 @@ class RoomArena(composer.Arena):
             self._deco_geom(body, **kw)
         return body
 
+    def _place_first_free(self, propose, tries: int):
+        """Rejection sampling: the first proposal ``(pos, yaw, lo, hi)`` whose box is free, or None."""
+        for _ in range(tries):
+            pos, yaw, lo, hi = propose()
+            if self._free(lo, hi):
+                self._placed.append((lo, hi))
+                return pos, yaw
+        return None
+
     def _place_furniture(self):
         rng = self._rng
         spec = ROOM_SPECS[self.room]
@@ -851,8 +860,8 @@ class RoomArena(composer.Arena):
         x_min = max(self.front_x + 0.05, -2.8)  # behind the camera nothing is seen
         for idx, (item, where) in enumerate(spec["floor"]):
             hx0, hy0, h, parts = FLOOR_ITEMS[item](rng)
-            ok = False
-            for _ in range(60):
+
+            def propose_floor(where=where, hx0=hx0, hy0=hy0, h=h):
                 side = 1 if rng.random() < 0.5 else -1
                 if where == "back":  # against the back wall, facing -x
                     yaw, hx, hy = np.pi, hx0, hy0
@@ -871,20 +880,16 @@ class RoomArena(composer.Arena):
                     hx, hy = (hx0, hy0) if int(round(yaw / (np.pi / 2))) % 2 == 0 else (hy0, hx0)
                     x = rng.uniform(x_min + hx, self.back_x - hx)
                     y = side * rng.uniform(k.zone_y + k.los_margin + hy, max(W - hy, k.zone_y + k.los_margin + hy + 1e-3))
-                lo = np.array([x - hx, y - hy, 0.0])
-                hi = np.array([x + hx, y + hy, h])
-                if self._free(lo, hi):
-                    ok = True
-                    break
-            if not ok:
-                continue
-            self._placed.append((lo, hi))
-            self._add_item(f"{item}{idx}", parts, (x, y, 0.0), yaw)
-            self.furniture.append(item)
+                return (x, y, 0.0), yaw, np.array([x - hx, y - hy, 0.0]), np.array([x + hx, y + hy, h])
+
+            placed = self._place_first_free(propose_floor, 60)
+            if placed is not None:
+                self._add_item(f"{item}{idx}", parts, *placed)
+                self.furniture.append(item)
         for idx, (item, wall, zc) in enumerate(spec["wall"]):
             hd, hy0, hz, parts = WALL_ITEMS[item](rng)
-            ok = False
-            for _ in range(40):
+
+            def propose_wall(wall=wall, zc=zc, hd=hd, hy0=hy0, hz=hz):
                 z = zc + rng.uniform(-0.1, 0.1)
                 z = min(max(z, hz + 0.01), self.ceiling - hz - 0.02)
                 if wall == "back":
@@ -897,14 +902,12 @@ class RoomArena(composer.Arena):
                     x, y = rng.uniform(x_min + hy0, self.back_x - hy0 - 0.05), side * W
                     lo = np.array([x - hy0, y - 2 * hd if side > 0 else y, z - hz])
                     hi = np.array([x + hy0, y if side > 0 else y + 2 * hd, z + hz])
-                if self._free(lo, hi):
-                    ok = True
-                    break
-            if not ok:
-                continue
-            self._placed.append((lo, hi))
-            self._add_item(f"{item}_w{idx}", parts, (x, y, z), yaw)
-            self.furniture.append(item)
+                return (x, y, z), yaw, lo, hi
+
+            placed = self._place_first_free(propose_wall, 40)
+            if placed is not None:
+                self._add_item(f"{item}_w{idx}", parts, *placed)
+                self.furniture.append(item)
 
     # ------------------------------------------------------------------ API
     @property
