@@ -466,20 +466,34 @@ def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.nda
     return _slerp_path(q, target, max_angle, 1)[0]
 
 
-def _slerp_path(q: np.ndarray, target: np.ndarray, step_angle: float, n: int) -> np.ndarray:
-    """``n`` quaternions from ``q`` toward ``target``, the k-th at most k * step_angle away."""
-    q = np.asarray(q, float) / np.linalg.norm(q)
-    target = np.asarray(target, float) / np.linalg.norm(target)
-    dot = float(np.dot(q, target))
-    if dot < 0:
-        target, dot = -target, -dot
+def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
+    """``n`` quaternions (n, 4) from ``q`` toward ``target``, the k-th at most k * step_angle away.
+
+    Runs on most control steps (the planner turns the hand as a door swings), so it is plain float
+    arithmetic: for 4-vectors that is about twice as fast as numpy.
+    """
+    q0, q1, q2, q3 = (float(x) for x in q)
+    norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+    t0, t1, t2, t3 = (float(x) for x in target)
+    norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
+    t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
+    dot = q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3
+    if dot < 0:  # the shorter way round
+        t0, t1, t2, t3, dot = -t0, -t1, -t2, -t3, -dot
     angle = 2 * math.acos(min(1.0, dot))
     if angle < 1e-9:
-        return np.tile(target, (n, 1))
-    t = np.minimum(np.arange(1, n + 1) * step_angle / angle, 1.0)[:, None]
+        return np.tile((t0, t1, t2, t3), (n, 1))
     half = angle / 2
-    out = (np.sin((1 - t) * half) * q + np.sin(t * half) * target) / math.sin(half)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+    sin_half = math.sin(half)
+    rows = []
+    for k in range(1, n + 1):
+        t = min(k * step_angle / angle, 1.0)
+        a, b = math.sin((1 - t) * half) / sin_half, math.sin(t * half) / sin_half
+        x0, x1, x2, x3 = a * q0 + b * t0, a * q1 + b * t1, a * q2 + b * t2, a * q3 + b * t3
+        norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3)
+        rows.append((x0 / norm, x1 / norm, x2 / norm, x3 / norm))
+    return np.array(rows)
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
