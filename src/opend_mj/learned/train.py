@@ -73,6 +73,20 @@ def _one_cycle(opt, lr: float, total_steps: int, pct_start: float):
     return torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(1, total_steps), pct_start=pct_start)
 
 
+def _optimise(loop: "_Loop", model, params, lr: float, epochs: int, steps_per_epoch: int, pct_start: float,
+              resume: bool):
+    """AdamW and a one-cycle schedule over the epochs left; on resume, their saved state (via ``loop``)."""
+    import torch
+
+    opt = torch.optim.AdamW(params, lr=lr, weight_decay=1e-4)
+    sched = _one_cycle(opt, lr, epochs * steps_per_epoch, pct_start)
+    if resume:
+        loop.resume(model, opt, sched)
+        if loop.rebuild_scheduler:
+            sched = _one_cycle(opt, lr, (epochs - loop.start_epoch) * steps_per_epoch, pct_start)
+    return opt, sched
+
+
 class _Loop:
     """Shared bookkeeping: epochs, time limit, checkpoints, resume, history, progress."""
 
@@ -279,14 +293,9 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     if pretrained and not resume:
         load_pretrained(model, pretrained, "cliport", log)
     model = model.to(dev)
-    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
-    sched = _one_cycle(opt, lr, epochs * steps_per_epoch, 0.15)
     loop = _Loop("cliport", out, state_path, epochs, max_minutes, progress, log)
-    if resume:
-        loop.resume(model, opt, sched)
-        if loop.rebuild_scheduler:
-            sched = _one_cycle(opt, lr, (epochs - loop.start_epoch) * steps_per_epoch, 0.15)
+    opt, sched = _optimise(loop, model, model.parameters(), lr, epochs, steps_per_epoch, 0.15, resume)
     bce = torch.nn.BCEWithLogitsLoss(pos_weight=torch.tensor(pos_weight, device=dev))
     val_pairs = _pairs(val_recs, all_targets=True)
     log(f"cliport: {len(train_recs)} train images, {len(val_pairs)} validation targets, device {dev}, "
@@ -454,14 +463,9 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
         load_pretrained(model, pretrained, "fasterrcnn", log)
     model = model.to(dev)
     params = [p for p in model.parameters() if p.requires_grad]
-    opt = torch.optim.AdamW(params, lr=lr, weight_decay=1e-4)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
-    sched = _one_cycle(opt, lr, epochs * steps_per_epoch, 0.1)
     loop = _Loop("fasterrcnn", out, state_path, epochs, max_minutes, progress, log)
-    if resume:
-        loop.resume(model, opt, sched)
-        if loop.rebuild_scheduler:
-            sched = _one_cycle(opt, lr, (epochs - loop.start_epoch) * steps_per_epoch, 0.1)
+    opt, sched = _optimise(loop, model, params, lr, epochs, steps_per_epoch, 0.1, resume)
     log(f"fasterrcnn ({config.backbone}): {len(train_recs)} train images, {len(val_recs)} validation images, "
         f"device {dev}, {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters")
     for epoch in range(loop.start_epoch, epochs):
