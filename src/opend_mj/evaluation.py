@@ -215,8 +215,7 @@ def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[d
             try:
                 env = _make_env(job)
             except Exception as exc:  # noqa: BLE001 (reported per episode; nothing else can run here)
-                records.append({**_base(job), **error_record(job, exc),
-                                "wall_seconds": round(time.perf_counter() - t0, 3)})
+                records.append({**error_record(job, exc), "wall_seconds": round(time.perf_counter() - t0, 3)})
                 continue
             build_s = time.perf_counter() - t0
             rec = run_episode(job, env)

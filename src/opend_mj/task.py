@@ -461,11 +461,6 @@ class OpenDEnvironment(composer.Environment):
         return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount, obs)
 
 
-def _slerp_toward(q: np.ndarray, target: np.ndarray, max_angle: float) -> np.ndarray:
-    """Rotate ``q`` toward ``target`` by at most ``max_angle`` radians (shortest way)."""
-    return _slerp_path(q, target, max_angle, 1)[0]
-
-
 def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
     """``n`` quaternions (n, 4) from ``q`` toward ``target``, the k-th at most k * step_angle away.
 
