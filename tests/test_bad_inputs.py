@@ -10,9 +10,9 @@ from typing import Callable
 
 import pytest
 
-from opend_mj.compiler import compile_cabinet
-from opend_mj.dataset import build_dataset
-from opend_mj.procedural import generate_source
+from opend_mj.assets.compiler import compile_cabinet
+from opend_mj.assets.dataset import build_dataset
+from opend_mj.assets.procedural import generate_source
 
 #: proc_0013 of seed 0 is a single door (revolute joint), proc_0001 a single drawer; both describable.
 DOOR_INDEX, DRAWER_INDEX = 13, 1

@@ -6,8 +6,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
-from opend_mj.camera import RGBDCamera, geom_box_corners, place_camera  # noqa: E402
-from opend_mj.rooms import ROOM_NAMES, KeepOut, RoomArena  # noqa: E402
+from opend_mj.sim.camera import RGBDCamera, geom_box_corners, place_camera  # noqa: E402
+from opend_mj.sim.rooms import ROOM_NAMES, KeepOut, RoomArena  # noqa: E402
 
 BOX = (0.25, 0.45, 1.2)  # half x, half y, height of the stand-in cabinet
 

@@ -54,7 +54,8 @@ def _tables(text: str) -> str:
 
 
 def _run_timed(jobs, workers: int) -> tuple[list[dict], float]:
-    from opend_mj.evaluation import load_results, run_jobs
+    from opend_mj.evaluation.pool import run_jobs
+    from opend_mj.evaluation.results import load_results
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "r.jsonl"
@@ -66,7 +67,7 @@ def _run_timed(jobs, workers: int) -> tuple[list[dict], float]:
 
 def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
     """Oracle episodes (allegro): workers scaling, physics timesteps, solver inference."""
-    from opend_mj.evaluation import make_jobs
+    from opend_mj.evaluation.jobs import make_jobs
 
     jobs = make_jobs(cabinets, ["allegro"], "oracle", split="test", limit=n_episodes)
     rates = {1: [], 2: []}
@@ -108,10 +109,10 @@ def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
 
 def _inference_lines(cabinets: Path) -> list[str]:
     """Milliseconds per image of each shipped learned solver (CPU), on one rendered test image."""
-    from opend_mj.camera import RGBDCamera
-    from opend_mj.dataset import load_manifest
-    from opend_mj.solvers import get_solver
-    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+    from opend_mj.sim.camera import RGBDCamera
+    from opend_mj.assets.layout import load_manifest
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
     cab, tgt = load_manifest(cabinets).targets("test")[0]
     env = make_environment(EpisodeSpec(cabinets / cab["path"], tgt["joint"], "allegro"), TaskConfig(enable_rgbd=False))

@@ -42,10 +42,9 @@ class LazyGroup(click.Group):
         module_name, attr = target.split(":")
         try:
             module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:  # a command whose module is not written yet
-            if exc.name and exc.name.startswith("opend_mj"):
-                return None
-            raise
+        except ImportError as exc:  # a broken install or module: say so, do not pretend the command is unknown
+            raise click.ClickException(
+                f"command {name!r} cannot be loaded: {type(exc).__name__}: {exc} (in {module_name})") from exc
         return getattr(module, attr)
 
 

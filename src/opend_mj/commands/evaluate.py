@@ -8,7 +8,7 @@ import click
 
 
 def _check_hands(ctx, param, value):
-    from opend_mj.hands import list_hands
+    from opend_mj.sim.hands import list_hands
 
     known = list_hands()
     for name in value:
@@ -18,7 +18,7 @@ def _check_hands(ctx, param, value):
 
 
 def _check_solver(ctx, param, value):
-    from opend_mj.solvers import list_solvers
+    from opend_mj.policy.solvers import list_solvers
 
     if value not in list_solvers():
         raise click.BadParameter(f"unknown handle solver {value!r}; known: {', '.join(list_solvers())}", ctx, param)
@@ -31,7 +31,7 @@ def _check_timestep(ctx, param, value):
         return None
     from fractions import Fraction
 
-    from opend_mj.task import TaskConfig
+    from opend_mj.sim.task import TaskConfig
 
     try:
         seconds = float(Fraction(value.strip()))
@@ -81,7 +81,8 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
     `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments.
     """
     from opend_mj.backends import BackendError
-    from opend_mj.evaluation import make_jobs, run_jobs
+    from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.evaluation.pool import run_jobs
 
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
@@ -106,7 +107,12 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
 @click.option("--plot", "plot_path", type=click.Path(path_type=Path), default=None)
 def score(results, csv_path, plot_path):
     """The paper's tables from one or more results files (Markdown to stdout)."""
-    from opend_mj.scoring import load_records, plot_success, report_markdown, write_csv
+    from opend_mj.evaluation.scoring import (
+        load_records,
+        plot_success,
+        report_markdown,
+        write_csv,
+    )
 
     records = load_records(results)
     click.echo(report_markdown(records))
@@ -127,7 +133,7 @@ def score(results, csv_path, plot_path):
 @click.option("--save/--no-save", default=True, show_default=True)
 def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
     """Search finger closing and grasp depth on the first training cabinets; save hands/<hand>/grasp.json."""
-    from opend_mj.planner import search_grasp as _search
+    from opend_mj.evaluation.grasp_search import search_grasp as _search
 
     profile = _search(hand, cabinets_dir, n_cabinets=n_cabinets,
                       scales=[float(x) for x in scales.split(",")],
