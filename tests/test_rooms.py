@@ -35,8 +35,10 @@ def test_room_names():
 def test_room_compiles_and_renders(room):
     arena, physics = build(room, seed=room)
     m = physics.model.ptr
-    assert m.opt.timestep == pytest.approx(0.002)
-    assert m.opt.impratio == pytest.approx(10)
+    from opend_mj.sim.physics import PHYSICS
+
+    assert m.opt.timestep == pytest.approx(PHYSICS.timestep)  # the project's options, one definition
+    assert m.opt.impratio == pytest.approx(PHYSICS.impratio) and m.opt.cone == 1  # elliptic
     assert m.vis.global_.offwidth >= 640 and m.vis.global_.offheight >= 480
     with RGBDCamera(physics, "front", 256, 256) as cam:
         rgb = cam.render_rgb()
