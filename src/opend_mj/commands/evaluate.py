@@ -18,10 +18,12 @@ def _check_hands(ctx, param, value):
 
 
 def _check_solver(ctx, param, value):
+    """A known solver name (or a tuple of them, for options given several times)."""
     from opend_mj.policy.solvers import list_solvers
 
-    if value not in list_solvers():
-        raise click.BadParameter(f"unknown handle solver {value!r}; known: {', '.join(list_solvers())}", ctx, param)
+    for name in (value,) if isinstance(value, str) else value:
+        if name not in list_solvers():
+            raise click.BadParameter(f"unknown handle solver {name!r}; known: {', '.join(list_solvers())}", ctx, param)
     return value
 
 
@@ -141,3 +143,28 @@ def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
     click.echo(f"chosen: close_scale={profile.close_scale} grasp_depth={profile.grasp_depth}")
     if save:
         click.echo(f"saved {profile.save()}")
+
+
+@click.command("evaluate-solver")
+@click.option("--solver", "solvers", multiple=True, default=("cliport",), show_default=True, callback=_check_solver,
+              help="Handle solver (repeat for several).")
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
+@click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write one JSON line per target and solver here.")
+@click.option("--progress/--no-progress", default=True)
+def evaluate_solver(solvers, cabinets_dir, split, seed, light_scale, paraphrase, limit, out, progress):
+    """Locate rate of handle solvers: render each target's scene once, grade the solver's box (no episodes)."""
+    from opend_mj.evaluation.locate import evaluate_locate, format_summary, summarise
+
+    records = []
+    for solver in solvers:
+        part = None if out is None else out.with_name(f"{out.stem}_{solver}{out.suffix}") if len(solvers) > 1 else out
+        records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
+                                   paraphrase=paraphrase, limit=limit, progress=progress, out=part)
+    click.echo(format_summary(summarise(records)))

@@ -56,7 +56,7 @@ def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[d
         if env is None:
             t0 = time.perf_counter()
             try:
-                env = _make_env(job)
+                env = make_episode_env(job)
             except Exception as exc:  # noqa: BLE001 (reported per episode; nothing else can run here)
                 records.append({**error_record(job, exc), "wall_seconds": round(time.perf_counter() - t0, 3)})
                 continue
@@ -126,7 +126,7 @@ class _StopAtLast:
         return ts
 
 
-def _instruction_for(job: EpisodeJob) -> str | None:
+def instruction_for(job: EpisodeJob) -> str | None:
     """The job's paraphrased instruction, or None for the target's own (Algorithm 1)."""
     if not job.paraphrase:
         return None
@@ -137,11 +137,11 @@ def _instruction_for(job: EpisodeJob) -> str | None:
     return paraphrase(Description(target["vertical"], target["horizontal"], target["type"]), job.paraphrase)
 
 
-def _make_env(job: EpisodeJob):
+def make_episode_env(job: EpisodeJob):
     from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
     spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
-                          seed=job.seed, room=job.room, instruction=_instruction_for(job))
+                          seed=job.seed, room=job.room, instruction=instruction_for(job))
     config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
     if job.physics_timestep is not None:
         config = replace(config, physics_timestep=float(job.physics_timestep))
@@ -162,9 +162,9 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
     from opend_mj.sim.hands import load_spec
 
     if env is None:
-        env = _make_env(job)
+        env = make_episode_env(job)
     else:
-        env.task.set_target(job.joint, _instruction_for(job))
+        env.task.set_target(job.joint, instruction_for(job))
     task = env.task
     config = task.config
     env.reset()
