@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from opend_mj.language import LanguageConfig
-from opend_mj.language import Description, LanguageInvalid, TargetLayout, describe, paraphrase
+from opend_mj.language import PARAPHRASES, Description, LanguageConfig, LanguageInvalid, TargetLayout, describe, paraphrase
 
 
 def stack(n: int, kind: str = "drawer", y: float = 0.0, z0: float = 0.1, dz: float = 0.15) -> list[TargetLayout]:
@@ -187,3 +186,13 @@ def test_describe_instruction_reads_labels():
     assert parse_instruction("middle drawer") == ("middle", "", "drawer")
     assert parse_instruction("top middle door") == ("top", "middle", "door")
     assert parse_instruction("open the drawer at the top on the second right") == ("top", "second right", "drawer")
+
+
+@pytest.mark.parametrize("template", range(len(PARAPHRASES)))
+def test_canonical_instruction_undoes_every_paraphrase(template):
+    from opend_mj.language import canonical_instruction
+
+    for labels in [("top", "left", "drawer"), ("second bottom", "", "door"), ("", "second right", "door"),
+                   ("middle", "middle", "drawer"), ("", "", "drawer")]:
+        d = Description(*labels)
+        assert canonical_instruction(paraphrase(d, template)) == d.instruction

@@ -131,6 +131,13 @@ def describe_instruction(instruction: str) -> Description:
     return Description(vertical=vertical, horizontal=horizontal, kind=kind)
 
 
+def canonical_instruction(instruction: str) -> str:
+    """The Algorithm 1 form of an instruction or a reworded one ("open the drawer at the top on the
+    left" -> "top left drawer"), so that a model trained on Algorithm 1's wording reads any wording
+    the parser understands."""
+    return describe_instruction(instruction).instruction
+
+
 def target_kind(instruction: str) -> str:
     """door or drawer, from an instruction's words (Algorithm 1 form or a paraphrase)."""
     return describe_instruction(instruction).kind

@@ -236,14 +236,21 @@ class CLIPortSolver:
     name = "cliport"
     needs_ground_truth = False
 
-    def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0):
+    def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
+                 canonical: bool = True):
         self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
         self.min_box = min_box
+        #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
+        #: so reworded instructions reach the model in the wording it was trained on.
+        self.canonical = canonical
         self.last_map: np.ndarray | None = None
 
     def solve(self, rgb, depth, instruction, camera_view):
+        from opend_mj.language import canonical_instruction
         from opend_mj.policy.handle import HandleBox
 
+        if self.canonical:
+            instruction = canonical_instruction(instruction)
         prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
         self.last_map = prob
         _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
