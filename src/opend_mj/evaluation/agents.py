@@ -168,14 +168,15 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
             obs["rgb"], obs["depth"] = reader.render()
         return obs
 
-    video = VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
+    video = None
     penetration = PenetrationProbe(physics.data.ptr)
     max_steps = int(round(PROTOCOL_TIME_LIMIT / task.control_timestep))
     closest = reader.probe.distance()
     steps, stopped, diverged = 0, False, False
     try:
+        obs = observe(True)  # before the video's renderer opens (one renderer at a time: the planner's image)
+        video = VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
         agent.reset(info)
-        obs = observe(True)
         while steps < max_steps:
             action = agent.act(obs)
             if action is None:

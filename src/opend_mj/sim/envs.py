@@ -263,11 +263,20 @@ class SceneReader:
         pose[:3, 3] = view.pos
         return {"camera_K": view.intrinsics.matrix, "camera_pose": pose}
 
+    #: The one reader per process whose renderer is open. Renderers of several models open at once
+    #: on the process's shared GL context give images that depend on which was made last (textures),
+    #: so a scene's renderer is closed when another scene renders.
+    _rendering: "SceneReader | None" = None
+
     def render(self) -> tuple[np.ndarray, np.ndarray]:
         if self._camera is None:
             from opend_mj.sim.camera import RGBDCamera
 
+            other = SceneReader._rendering
+            if other is not None and other is not self:
+                other.close()
             self._camera = RGBDCamera(self.physics, "front", self.image_size, self.image_size)
+            SceneReader._rendering = self
         return self._camera.render()
 
     def privileged(self) -> dict:
@@ -279,6 +288,8 @@ class SceneReader:
         if self._camera is not None:
             self._camera.close()
             self._camera = None
+        if SceneReader._rendering is self:
+            SceneReader._rendering = None
 
 
 class ActionAdapter:
