@@ -96,3 +96,13 @@ def any_cabinet(request) -> Compiled:
     if request.param == "real":
         return request.getfixturevalue("real_cabinet")
     return request.getfixturevalue("proc_cabinets")[int(request.param[4:])]
+
+
+@pytest.fixture(scope="session")
+def small_dataset(proc_sources, tmp_path_factory) -> Path:
+    """A compiled dataset (manifest + cabinets) of the first dozen procedural sources."""
+    from opend_mj.assets.dataset import build_dataset
+
+    out = tmp_path_factory.mktemp("small_dataset")
+    build_dataset(proc_sources[:12], out, workers=2, progress=False, log=lambda *a: None)
+    return out

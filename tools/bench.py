@@ -8,8 +8,10 @@ Sections (each a subprocess, so that its peak memory can be read):
             default physics timestep (1/480 s) and at 1/120 s
   episodes- here: episodes/min with 1 and 2 workers (scaling); success, contact penetration and speed
             at three physics timesteps; handle solver inference ms per image
+  envs    - tools/bench_env.py: gymnasium environment steps/s, state-only and RGB-D, one process and a
+            2-process vector environment
 
-    python tools/bench.py [--quick] [--sections assets,hands,task,episodes] [--out BENCHMARKS.md]
+    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -143,7 +145,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=ROOT / "BENCHMARKS.md")
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
-    parser.add_argument("--sections", default="assets,hands,task,episodes")
+    parser.add_argument("--sections", default="assets,hands,task,episodes,envs")
     parser.add_argument("--quick", action="store_true", help="smaller counts (a few minutes in all)")
     args = parser.parse_args()
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -195,6 +197,10 @@ def main() -> None:
         mem = max(before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                   resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024.0
         body += ["## Episodes", "", text, "", f"Peak memory of one process {mem:.0f} MiB.", ""]
+    if "envs" in sections:
+        out, secs, mem = _run(["tools/bench_env.py", "--cabinets", str(args.cabinets),
+                               "--steps", "300" if quick else "1500"])
+        body += ["## Environments (gymnasium)", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
     load_after = os.getloadavg()
     header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "
                       f"on {os.cpu_count()} cores: above about 1, other work shared the cores and the worker "

@@ -75,25 +75,58 @@ def _check_cabinets(ctx, param, value):
 @click.option("--physics-timestep", "physics_timestep", default=None, callback=_check_timestep,
               help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
                    "see BENCHMARKS.md for success and penetration at each.")
-def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
-        pull, paraphrase, physics_timestep):
+@click.option("--policy", default=None, metavar="module:Class|file.py[:Class]",
+              help="Evaluate this agent instead of the planner (see README, Evaluation protocol); "
+                   "its name is the results' solver column.")
+@click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
+              help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
+@click.option("--wait", is_flag=True, default=False,
+              help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
+@click.pass_context
+def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
+        pull, paraphrase, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
-    `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments.
+    `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments, or when
+    another run is writing the same --out (one writer per results file; --wait waits instead).
     """
+    import dataclasses
+
     from opend_mj.backends import BackendError
     from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.evaluation.lock import ResultsLocked
     from opend_mj.evaluation.pool import run_jobs
 
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
+    policy_spec, parsed_args = None, ()
+    if policy is not None:
+        from opend_mj.evaluation.agents import agent_name, load_agent, parse_policy_args, resolve_policy
+
+        if ctx.get_parameter_source("solver") is not click.core.ParameterSource.DEFAULT:
+            raise click.UsageError("--policy and --solver exclude each other (an agent finds the handle itself)")
+        try:
+            parsed_args = parse_policy_args(policy_args)
+            target, attr = resolve_policy(policy)
+            policy_spec = f"{target}:{attr}"
+            solver = agent_name(load_agent(policy_spec, parsed_args))
+        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
+            raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
+    elif policy_args:
+        raise click.UsageError("--policy-arg needs --policy")
     jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
                      limit=limit, video_dir=video_dir, paraphrase=paraphrase, physics_timestep=physics_timestep)
+    if policy_spec is not None:
+        jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
-        counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address)
+        counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address, wait=wait,
+                          on_wait=lambda message: click.echo(f"waiting: {message}", err=True))
+    except ResultsLocked as exc:
+        click.echo(f"error: {exc}", err=True)
+        raise SystemExit(2) from None
     except (ValueError, BackendError) as exc:  # a results file corrupt in its middle; no Ray cluster
         raise click.ClickException(str(exc)) from exc
     click.echo(f"{counts['ran']} episodes run, {counts['skipped']} already done, {counts['errors']} errors, "

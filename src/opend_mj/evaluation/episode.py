@@ -79,6 +79,10 @@ class EpisodeJob:
     paraphrase: int = 0
     #: Physics timestep in seconds; None: TaskConfig's default.
     physics_timestep: float | None = None
+    #: An agent acts instead of the planner (`opend run --policy`): its spec and constructor
+    #: arguments ((key, value), ...). Not part of the key: the agent's name is the ``solver``.
+    policy: str | None = None
+    policy_args: tuple = ()
 
     def key(self) -> tuple:
         return episode_key(asdict(self))

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from opend_mj.evaluation.agents import run_group
 from opend_mj.evaluation.episode import EpisodeJob, episode_key
 from opend_mj.evaluation.jobs import group_jobs
+from opend_mj.evaluation.lock import ResultsLock
 from opend_mj.evaluation.results import ResultsWriter, load_results, sort_results
-from opend_mj.evaluation.runner import error_reason, error_record, run_episode_group
+from opend_mj.evaluation.runner import error_reason, error_record
 
 
 def _worker_init() -> None:
@@ -41,13 +43,22 @@ def check_cabinet_files(cabinet_dir: str | Path) -> None:
 
 
 def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool = True,
-             backend: str = "local", address: str | None = None, executor=None, sort: bool = True) -> dict:
+             backend: str = "local", address: str | None = None, executor=None, sort: bool = True,
+             wait: bool = False, on_wait=None) -> dict:
     """Run the jobs not yet in ``out`` (resumable) and append their records. Returns counts.
 
     ``backend``: ``"local"`` (this process when ``workers == 1``, else a spawn pool of ``workers``)
     or ``"ray"`` (``address`` of a cluster, or a local Ray instance); or pass an ``executor`` from
     `opend_mj.backends`. Only this process writes ``out``. With ``sort``, the file ends in job order.
+
+    The run owns ``out`` while it runs (`evaluation.lock`): if another run holds it, this raises
+    `ResultsLocked`, or with ``wait`` waits for it (and then skips the episodes it wrote).
     """
+    with ResultsLock(out, wait=wait, on_wait=on_wait):
+        return _run_jobs(jobs, out, workers, progress, backend, address, executor, sort)
+
+
+def _run_jobs(jobs, out, workers, progress, backend, address, executor, sort) -> dict:
     from tqdm import tqdm
 
     from opend_mj.backends import make_executor
@@ -97,7 +108,7 @@ def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool
             ex = executor if executor is not None else make_executor(backend, workers, address,
                                                                      initializer=_worker_init)
             try:
-                for group, recs, err in ex.imap_unordered(run_episode_group, group_jobs(runnable)):
+                for group, recs, err in ex.imap_unordered(run_group, group_jobs(runnable)):
                     if err is not None:
                         recs = [{**error_record(j, err), "wall_seconds": None} for j in group]
                     for rec in recs:

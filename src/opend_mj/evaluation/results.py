@@ -87,38 +87,54 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
-def sort_results(path: Path, jobs: list[EpisodeJob]) -> bool:
+def sort_results(path: Path, jobs: list[EpisodeJob], attempts: int = 5) -> bool:
     """Rewrite ``path`` with this run's records in job order (others first, in their order).
 
     Atomic (a temporary file, fsync, rename), so a ``kill -9`` leaves either the old or the new file.
-    Returns whether the file was rewritten (not when it is already in order, or jobs are missing).
+    Never drops a line: the new file holds exactly the lines read, and if the file changed while it
+    was being sorted (a writer that does not take the run's lock appended to it), it is read again,
+    up to ``attempts`` times, then left as it is. Returns whether the file was rewritten (not when
+    it is already in order, or jobs are missing).
     """
     path = Path(path)
-    records = load_results(path)
-    if not records:
-        return False
-    index = {j.key(): i for i, j in enumerate(jobs)}
-    if not set(index) <= {episode_key(r) for r in records}:
-        return False  # an incomplete run: leave the file as it is
-    lines = [ln for ln in path.read_bytes().split(b"\n") if ln.strip()]
-    if len(lines) != len(records):
-        return False
-    order = sorted(range(len(records)), key=lambda i: (1, index[k], i) if (k := episode_key(records[i])) in index
-                   else (0, 0, i))
-    if order == list(range(len(records))):
-        return False
-    tmp = path.with_name(f".{path.name}.sorting")
-    with open(tmp, "wb") as f:
-        f.write(b"".join(lines[i] + b"\n" for i in order))
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    try:
-        dir_fd = os.open(path.parent, os.O_RDONLY)
+    for _ in range(attempts):
+        before = _stamp(path)
+        records = load_results(path)
+        if not records:
+            return False
+        index = {j.key(): i for i, j in enumerate(jobs)}
+        if not set(index) <= {episode_key(r) for r in records}:
+            return False  # an incomplete run: leave the file as it is
+        data = path.read_bytes()
+        lines = [ln for ln in data.split(b"\n") if ln.strip()]
+        if len(lines) != len(records):
+            return False
+        order = sorted(range(len(records)), key=lambda i: (1, index[k], i) if (k := episode_key(records[i])) in index
+                       else (0, 0, i))
+        if order == list(range(len(records))):
+            return False
+        new = b"".join(lines[i] + b"\n" for i in order)
+        tmp = path.with_name(f".{path.name}.sorting")
+        with open(tmp, "wb") as f:
+            f.write(new)
+            f.flush()
+            os.fsync(f.fileno())
+        if _stamp(path) != before or path.read_bytes() != data:
+            tmp.unlink(missing_ok=True)  # someone wrote meanwhile: sort again from what is there now
+            continue
+        os.replace(tmp, path)
         try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    except OSError:
-        pass
-    return True
+            dir_fd = os.open(path.parent, os.O_RDONLY)
+            try:
+                os.fsync(dir_fd)
+            finally:
+                os.close(dir_fd)
+        except OSError:
+            pass
+        return True
+    return False
+
+
+def _stamp(path: Path) -> tuple:
+    st = os.stat(path)
+    return (st.st_ino, st.st_size, st.st_mtime_ns)

@@ -72,8 +72,38 @@ def _fmt(cell) -> str:
     return "-" if not n else f"{100 * rate:.1f} ({k}/{n})"
 
 
+def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
+    """Agents and solvers ranked: (hand, solver) rows by test success, then train success (20 %).
+
+    One row per (hand, solver) with its success rates, episode counts and how many episodes opened
+    a wrong target; ties keep the name order.
+    """
+    rows = []
+    for row in success_table(records, threshold):
+        recs = groups(records)[(row["hand"], row["solver"])]
+        rows.append({**row, "episodes": len(recs), "wrong_targets": sum(bool(r.get("others_moved")) for r in recs)})
+
+    def rate(cell):
+        return -1.0 if cell[0] is None else cell[0]
+
+    rows.sort(key=lambda r: (-rate(r["test_overall"]), -rate(r["train_overall"])))
+    for i, r in enumerate(rows, 1):
+        r["rank"] = i
+    return rows
+
+
 def report_markdown(records: list[dict]) -> str:
     lines = [f"# Results ({len(records)} episodes)", ""]
+    lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
+    lines.append("")
+    lines.append("| rank | solver / agent | hand | test overall | test drawer | test door | train overall | episodes | "
+                 "wrong target opened |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
+    for r in ranking(records):
+        lines.append(f"| {r['rank']} | {r['solver']} | {r['hand']} | {_fmt(r['test_overall'])} | "
+                     f"{_fmt(r['test_drawer'])} | {_fmt(r['test_door'])} | {_fmt(r['train_overall'])} | "
+                     f"{r['episodes']} | {r['wrong_targets']} |")
+    lines.append("")
     for th in THRESHOLDS:
         lines.append(f"## Success rate, open ratio > {int(round(th * 100))} %")
         lines.append("")

@@ -1,4 +1,24 @@
-"""A gymnasium-compatible wrapper of the OpenD task, for RL users.
+"""gymnasium environments: registered ids over the dataset, and a wrapper of one fixed episode.
+
+Importing this module registers (see `opend_mj.sim.envs` for what an episode, an observation and an
+action are)::
+
+    import gymnasium as gym
+    import opend_mj.sim.gym_env  # noqa: F401  (registers the ids below)
+
+    env = gym.make("opend/OpenCabinet-v0", hand="allegro", split="train", cabinets="cabinets",
+                   obs_mode="state")          # or "rgbd"; privileged=True adds the handle's box
+    obs, info = env.reset(seed=0)            # samples cabinet, target, room and hand start
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    info["success"], info["open_ratio"], info["others_moved"]
+
+    envs = gym.make_vec("opend/OpenCabinet-v0", num_envs=4, vectorization_mode="async",
+                        vector_kwargs={"context": "spawn"}, cabinets="cabinets")
+
+``opend/OpenDrawer-v0`` and ``opend/OpenDoor-v0`` sample drawers or doors only. Without importing
+this module first, ``gym.make("opend_mj.sim.gym_env:opend/OpenCabinet-v0", ...)`` imports it.
+
+`OpenDGymEnv` (below the registered environment) wraps one fixed episode:
 
     env = OpenDGymEnv(EpisodeSpec(Path("cabinets/proc_0004"), "joint_0", "allegro", seed=0))
     obs, info = env.reset(seed=0)
@@ -19,6 +39,89 @@ import numpy as np
 from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
 _ARRAY_KEYS = ("rgb", "depth", "hand_joint_pos", "root_pos", "root_quat")
+
+ENV_IDS = {"opend/OpenCabinet-v0": {}, "opend/OpenDrawer-v0": {"target_types": ("drawer",)},
+           "opend/OpenDoor-v0": {"target_types": ("door",)}}
+
+
+class OpenCabinetEnv(gym.Env):
+    """A cabinet, a target, a room and a hand start sampled at each ``reset(seed=...)``.
+
+    Keyword arguments: the fields of `opend_mj.sim.envs.EnvConfig` (``hand``, ``split``,
+    ``cabinets``, ``cabinet_ids``, ``target_types``, ``obs_mode``, ``privileged``, ``instruction``,
+    ``control``, ``reward_mode``, ``image_size``, ``time_limit``, ...). Observations are float32 (rgb
+    uint8); ``info`` carries ``success``, ``open_ratio``, ``others_moved``, the episode and
+    ``reward_terms``. ``reset(options={"cabinet": id, "target": joint, "room": k})`` fixes parts of
+    the episode.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 60}
+
+    def __init__(self, render_mode: str | None = None, **kwargs):
+        from opend_mj.sim.envs import OpenDCore, make_config
+
+        self.render_mode = render_mode
+        self.core = OpenDCore(make_config(**kwargs))
+        spaces = {}
+        for key, (shape, kind) in self.core.observation_layout().items():
+            if kind == "text":
+                spaces[key] = gym.spaces.Text(max_length=128, charset=_CHARSET)
+            elif kind == "uint8":
+                spaces[key] = gym.spaces.Box(0, 255, shape, np.uint8)
+            else:
+                spaces[key] = gym.spaces.Box(*_bounds(key), shape, np.float32)
+        self.observation_space = gym.spaces.Dict(spaces)
+        low, high = self.core.action_bounds()
+        self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self.action_names = self.core.action_names()
+
+    def _obs(self, raw: dict) -> dict:
+        out = {}
+        for key, space in self.observation_space.spaces.items():
+            value = raw[key]
+            out[key] = value if isinstance(space, gym.spaces.Text) else np.asarray(value, dtype=space.dtype)
+        return out
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        episode_seed = int(seed) if seed is not None else int(self.np_random.integers(2**31 - 1))
+        obs, info = self.core.reset(episode_seed, options)
+        return self._obs(obs), info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.core.step(np.asarray(action, dtype=np.float64))
+        return self._obs(obs), float(reward), terminated, truncated, info
+
+    def render(self):
+        return self.core.render()
+
+    def close(self):
+        self.core.close()
+
+
+def _bounds(key: str) -> tuple[float, float]:
+    """Bounds of a float observation: unit for quaternions and codes, else wide (never reached)."""
+    if key.endswith("_quat"):
+        return -1.0, 1.0
+    if key in ("instruction", "open_ratio"):
+        return 0.0, 1.0
+    if key in ("depth", "time", "handle_size"):
+        return 0.0, _WIDE
+    return -_WIDE, _WIDE
+
+
+_WIDE = 1.0e4
+_CHARSET = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 ,.'-"
+
+
+def register_envs() -> None:
+    """Register the ids of `ENV_IDS` with gymnasium (done on import; repeated calls are no-ops)."""
+    for env_id, kwargs in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point="opend_mj.sim.gym_env:OpenCabinetEnv", kwargs=dict(kwargs))
+
+
+register_envs()
 
 
 class OpenDGymEnv(gym.Env):
