@@ -30,13 +30,13 @@ def test_planner_as_an_agent_gives_the_planners_record(small_dataset):
     `opend run` does with the same handle box, to the bit."""
     from opend_mj.evaluation.agents import run_agent_episode
     from opend_mj.evaluation.jobs import make_jobs
-    from opend_mj.evaluation.runner import _make_env, run_episode
+    from opend_mj.evaluation.runner import make_episode_env, run_episode
     from opend_mj.policy.agents import PlannerAgent
     from opend_mj.policy.solvers import OracleSolver
 
     job = next(j for j in make_jobs(small_dataset, ["franka"], "oracle", split="all") if j.target_type == "drawer")
     reference = run_episode(job)
-    env = _make_env(job)
+    env = make_episode_env(job)
     try:
         agent = PlannerAgent(solver=OracleSolver(lambda: env.task.handle_boxes(env.physics)[env.task.target.joint]))
         record = run_agent_episode(job, env, agent)

@@ -15,7 +15,6 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
 
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
 

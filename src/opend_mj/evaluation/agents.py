@@ -1,7 +1,7 @@
 """`opend run --policy`: any agent (see `opend_mj.policy.agents`) on the benchmark's episodes.
 
 The episodes, scenes, seeds, records, resume and scoring are those of `opend run --solver`: the same
-jobs (`evaluation.jobs.make_jobs`), the same scene per cabinet and hand (`runner._make_env`), one
+jobs (`evaluation.jobs.make_jobs`), the same scene per cabinet and hand (`runner.make_episode_env`), one
 JSON line per episode. What differs is who acts: each control step the agent gets the observation
 the protocol allows (`policy.agents`) and returns an action, for at most ``PROTOCOL_TIME_LIMIT``
 seconds of simulated time (900 steps at 60 Hz) or until it returns None; then the success checker
@@ -27,7 +27,7 @@ import numpy as np
 
 from opend_mj.evaluation.episode import EpisodeJob, record_fields
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder
-from opend_mj.evaluation.runner import _instruction_for, _make_env, error_record, run_episode_group
+from opend_mj.evaluation.runner import instruction_for, make_episode_env, error_record, run_episode_group
 from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, agent_name
 
 #: The protocol's time limit for an agent (s of simulated time): TaskConfig's default episode length.
@@ -123,9 +123,9 @@ def run_agent_group(jobs) -> list[dict]:
         try:
             agent = load_agent(job.policy, job.policy_args)
             if env is None:
-                env = _make_env(job)
+                env = make_episode_env(job)
             else:
-                env.task.set_target(job.joint, _instruction_for(job))
+                env.task.set_target(job.joint, instruction_for(job))
             record = run_agent_episode(job, env, agent)
         except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
             record = error_record(job, exc)
@@ -138,7 +138,7 @@ def run_agent_group(jobs) -> list[dict]:
 
 
 def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
-    """One episode of ``agent`` on ``env`` (a scene made by `runner._make_env` for ``job``)."""
+    """One episode of ``agent`` on ``env`` (a scene made by `runner.make_episode_env` for ``job``)."""
     from opend_mj.sim.envs import ActionAdapter, SceneReader
 
     task = env.task
