@@ -121,12 +121,17 @@ class PlannerConfig:
     handle_radius: float = 0.007
     #: grasp style: a bar whose stand-off gap (m) is below this is pinched rather than wrapped
     pinch_gap: dict = field(default_factory=lambda: {"parallel_gripper": 0.0, "dexterous": 0.012})
+    #: parallel gripper: a finger's width outside its pad (m), the margin kept to a neighbour (m), and
+    #: the least clearance between an open pad and the bar (m)
+    gripper_finger_width: float = 0.021
+    neighbour_margin: float = 0.005
+    gripper_min_clearance: float = 0.008
     #: closed loop: grasp tries per episode, the episode's time budget (s), the time one more try needs
     max_grasp_tries: int = 3
     max_time: float = 24.0
     attempt_time: float = 3.0
     #: verification: after closing, pull back this far (m) at this speed (m/s); the grip holds when
-    #: at least ``hold_parts`` fingers (per hand type; the thumb counts, the palm does not) still press
+    #: at least ``hold_parts`` fingers (per hand type; not the thumb, not the palm) still press
     #: on something with more than ``touch_min`` N (fingertips that pressed on the panel behind a thin
     #: bar leave it when the hand pulls back; fingers round a handle do not)
     verify_grasp: bool = True
@@ -135,8 +140,11 @@ class PlannerConfig:
     touch_min: float = 0.3
     hold_parts: dict = field(default_factory=lambda: {"parallel_gripper": 2, "dexterous": 1})
     load_excludes: tuple = ("palm", "wrist")
-    #: during the pull: no load for this long (s) is a slip
-    slip_time: float = 0.3
+    #: during the pull: no touch at all (palm included) for this long (s) is a lost grip
+    slip_time: float = 0.4
+    #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
+    drawer_done: float = 0.25
+    door_done_deg: float = 80.0
     #: re-grasp: back off this far (m); with nothing held before, go this much deeper per try (m)
     backoff_distance: float = 0.06
     regrasp_deeper: float = 0.006
@@ -392,11 +400,16 @@ class Planner:
 
     def holding(self, robot: Robot) -> tuple[bool, dict]:
         """Whether the hand holds something, from touch: at least ``hold_parts`` fingers (thumb
-        included, palm not) press on something other than the hand."""
+        not, nor the thumb alone) press on something other than the hand."""
         touch = robot.contact_touch()
-        parts = [k for k, v in touch.items() if v > self.config.touch_min and k not in self.config.load_excludes]
+        parts = [k for k, v in touch.items()
+                 if v > self.config.touch_min and k not in self.config.load_excludes and k != "thumb"]
         need = self.config.hold_parts.get(self.spec.hand_type, 1)
         return len(parts) >= need, touch
+
+    def touching(self, robot: Robot) -> bool:
+        """Whether any part of the hand (palm included) presses on something."""
+        return any(v > self.config.touch_min for v in robot.contact_touch().values())
 
     def _time_left(self, robot: Robot) -> float:
         return self.config.max_time - robot.time
@@ -430,6 +443,9 @@ class Planner:
                 grasp = self.next_grasp(grasp, handle, shape, state, result)
                 continue
             status = self.pull(robot, grasp, door, state, result)
+            if status == "slipped" and (abs(state.turned) >= cfg.door_done_deg if door
+                                        else state.travelled >= cfg.drawer_done):
+                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
             if status == "done":
                 break
             self.back_off(robot, grasp)
@@ -502,9 +518,23 @@ class Planner:
         pos = handle.centre + np.array([depth, 0.0, 0.0])
         pre = self.spec.pregrasp_profile(orientation)
         closed = self.closed_profile(orientation)
+        if self.spec.hand_type == "parallel_gripper":
+            pre = self.gripper_opening(pre, orientation, shape, result)
         grasp = GraspChoice(style, orientation, quat, pos, pre, closed)
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
+
+    def gripper_opening(self, pre: np.ndarray, orientation: str, shape, result: PlanResult) -> np.ndarray:
+        """A parallel gripper opens no wider than the free space beside the handle allows (a
+        neighbouring handle of a double door 5-8 cm away), and never narrower than the bar."""
+        cfg = self.config
+        sides = ("up", "down") if orientation == "horizontal" else ("left", "right")
+        room = min(shape.clear[k] for k in sides) + shape.thickness / 2
+        opening = room - cfg.gripper_finger_width - cfg.neighbour_margin
+        opening = max(opening, shape.thickness / 2 + cfg.gripper_min_clearance)
+        if opening < float(np.max(pre)):
+            result.events.append({"gripper_opening": round(opening, 4)})
+        return np.minimum(pre, opening)
 
     def grasp_style(self, handle, shape) -> str:
         """``wrap`` round a knob; ``hook`` behind a bar where the stand-off gap lets the fingers
@@ -597,8 +627,8 @@ class Planner:
             robot.step(pos, quat, fingers)
 
     def pull(self, robot: Robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
-        """Pull until the part is open ("done") or stalls ("done"), or the grip slips ("slipped":
-        the fingers feel no load for ``slip_time`` while the hand moves)."""
+        """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
+        the hand touches nothing for ``slip_time`` while it moves)."""
         cfg = self.config
         self._stage(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
@@ -624,7 +654,7 @@ class Planner:
                 result.events.append({"grip_lost_at": round(state.travelled, 4)})
                 return "slipped"
             if cfg.verify_grasp:
-                quiet = quiet + 1 if not self.holding(robot)[0] else 0
+                quiet = quiet + 1 if not self.touching(robot) else 0
                 if quiet >= slip_n and state.travelled - start_travel > cfg.probe_distance:
                     result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
                     return "slipped"
