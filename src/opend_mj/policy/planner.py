@@ -131,15 +131,16 @@ class PlannerConfig:
     max_time: float = 24.0
     attempt_time: float = 3.0
     #: verification: after closing, pull back this far (m) at this speed (m/s); the grip holds when
-    #: at least ``hold_parts`` fingers (per hand type; not the thumb, not the palm) still press
+    #: at least ``hold_parts`` fingers (per hand type; the thumb counts, the palm does not) still press
     #: on something with more than ``touch_min`` N (fingertips that pressed on the panel behind a thin
     #: bar leave it when the hand pulls back; fingers round a handle do not)
     verify_grasp: bool = True
-    probe_distance: float = 0.015
+    probe_distance: float = 0.04
+    probe_min: float = 0.012
     probe_speed: float = 0.08
     touch_min: float = 0.3
     hold_parts: dict = field(default_factory=lambda: {"parallel_gripper": 2, "dexterous": 1})
-    load_excludes: tuple = ("palm", "wrist")
+    load_excludes: tuple = ("palm", "wrist", "other")
     #: during the pull: no touch at all (palm included) for this long (s) is a lost grip
     slip_time: float = 0.4
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
@@ -147,7 +148,7 @@ class PlannerConfig:
     door_done_deg: float = 80.0
     #: re-grasp: back off this far (m); with nothing held before, go this much deeper per try (m)
     backoff_distance: float = 0.06
-    regrasp_deeper: float = 0.006
+    regrasp_deeper: float = 0.008
     #: a deliberate miss of the first grasp (m, world offset; tests of the re-grasp)
     first_grasp_offset: tuple | None = None
     #: doors lost after opening at least ``push_min_turn`` degrees: push them open from inside
@@ -157,7 +158,7 @@ class PlannerConfig:
     push_clearance: float = 0.14
     push_entry_fraction: float = 0.45
     push_radius_fraction: float = 0.85
-    push_to_deg: float = 100.0
+    push_to_deg: float = 125.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -283,9 +284,7 @@ class Robot:
             h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
             if h1 == h2:
                 continue
-            part = self._geom_part.get(g1 if h1 else g2)
-            if part is None:
-                continue
+            part = self._geom_part.get(g1 if h1 else g2, "other")  # a geom without a touch site
             mujoco.mj_contactForce(m, d, i, self._force6)
             out[part] = out.get(part, 0.0) + abs(float(self._force6[0]))
         return out
@@ -400,16 +399,12 @@ class Planner:
 
     def holding(self, robot: Robot) -> tuple[bool, dict]:
         """Whether the hand holds something, from touch: at least ``hold_parts`` fingers (thumb
-        not, nor the thumb alone) press on something other than the hand."""
+        not) press on something other than the hand (a thumb alone can hook a bar)."""
         touch = robot.contact_touch()
         parts = [k for k, v in touch.items()
-                 if v > self.config.touch_min and k not in self.config.load_excludes and k != "thumb"]
+                 if v > self.config.touch_min and k not in self.config.load_excludes]
         need = self.config.hold_parts.get(self.spec.hand_type, 1)
         return len(parts) >= need, touch
-
-    def touching(self, robot: Robot) -> bool:
-        """Whether any part of the hand (palm included) presses on something."""
-        return any(v > self.config.touch_min for v in robot.contact_touch().values())
 
     def _time_left(self, robot: Robot) -> float:
         return self.config.max_time - robot.time
@@ -584,13 +579,20 @@ class Planner:
         self._hold(robot, target, g.quat, g.closed, cfg.settle_time)
         if not cfg.verify_grasp:
             return True
+        # pull back up to ``probe_distance``: a bar loose in a curled hand engages within a few cm
         start = robot.site_pos()
         n = max(1, int(math.ceil(cfg.probe_distance / (cfg.probe_speed * robot.control_dt))))
         back = -g.axis
+        held, touch = False, {}
         for i in range(1, n + 1):
             robot.step(start + back * cfg.probe_distance * i / n, g.quat, g.closed)
-        self._hold(robot, start + back * cfg.probe_distance, g.quat, g.closed, 0.1)
-        held, touch = self.holding(robot)
+            if cfg.probe_distance * i / n >= cfg.probe_min:
+                held, touch = self.holding(robot)
+                if held:
+                    break
+        if held:  # still holding after a moment: not a touch in passing
+            self._hold(robot, robot.site_pos(), g.quat, g.closed, 0.1)
+            held, touch = self.holding(robot)
         result.events.append({"verify": {"attempt": g.attempt, "held": held,
                                          "touch": {k: round(v, 1) for k, v in touch.items() if v > 0.1}}})
         return held
@@ -606,12 +608,13 @@ class Planner:
     def next_grasp(self, g: GraspChoice, handle, shape, state: PullState, result: PlanResult) -> GraspChoice:
         """The next try: where the grip last held (the handle moved with the part), else at the handle
         again with the fingers a little deeper behind it."""
-        if state.last_held is not None:
+        deeper = self.config.regrasp_deeper * (g.attempt + 1)
+        if state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
             pos, quat = state.last_held
-            new = GraspChoice(g.style, g.orientation, np.asarray(quat, float), np.asarray(pos, float) + 0.0,
+            quat = np.asarray(quat, float)
+            new = GraspChoice(g.style, g.orientation, quat, np.asarray(pos, float) + deeper * quat_axis_z(quat),
                               g.pre, g.closed, g.attempt + 1)
         else:
-            deeper = self.config.regrasp_deeper * (g.attempt + 1)
             new = GraspChoice(g.style, g.orientation, g.quat, g.pos + deeper * g.axis, g.pre, g.closed,
                               g.attempt + 1)
         result.events.append({"regrasp": new.to_dict()})
@@ -654,11 +657,13 @@ class Planner:
                 result.events.append({"grip_lost_at": round(state.travelled, 4)})
                 return "slipped"
             if cfg.verify_grasp:
-                quiet = quiet + 1 if not self.touching(robot) else 0
-                if quiet >= slip_n and state.travelled - start_travel > cfg.probe_distance:
+                held, touch = self.holding(robot)
+                touching = held or any(v > cfg.touch_min for v in touch.values())
+                quiet = quiet + 1 if not touching else 0
+                if quiet >= slip_n and state.travelled - start_travel > cfg.probe_min:
                     result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
                     return "slipped"
-                if quiet == 0:
+                if held:
                     state.last_held = (site.copy(), quat.copy())
                     state.track.append(site.copy())
             history.append(site.copy())
@@ -790,14 +795,6 @@ def fit_circle_xy(points: np.ndarray):
     if not np.isfinite(r2) or r2 <= 0:
         return None
     return np.array([cx, cy]), float(math.sqrt(r2))
-
-
-def _ray_point_at_x(view, point, x: float) -> np.ndarray:
-    """The point on the camera ray through ``point`` whose world x is ``x``."""
-    d = np.asarray(point, float) - view.pos
-    if abs(d[0]) < 1e-9:
-        return np.asarray(point, float)
-    return view.pos + (x - view.pos[0]) / d[0] * d
 
 
 __all__ = ["GRASP_FILE", "STAGES", "GraspChoice", "GraspProfile", "Observation", "PlanResult", "Planner",
