@@ -518,6 +518,12 @@ def write_readme(name: str, source_doc: str) -> None:
         f"light: `python -m mujoco.viewer --mjcf hands/{name}/scene.xml`), `spec.json` (grasp site, poses,",
         "grasp profiles), `grasp.json` where the grasp search wrote one, `render.png`.",
         "",
+        f"**Touch.** {len(spec.get('touch_sensors', {}))} MuJoCo `touch` sensors, one per collision geom of the "
+        "fingers, thumb and palm (site `touch_<geom>`: the geom grown by 2 mm); `spec.json` "
+        "`touch_sensors` names the part of each (" + ", ".join(sorted(set(spec.get("touch_sensors", {}).values())))
+        + "). The planner reads touch per part as the hand's own state (is it holding? did it slip?): the "
+        "normal forces of the contacts on these geoms, less the hand's own contacts (a thumb pressing on a finger).",
+        "",
         f"**Root.** Body `{spec['root_body']}`; in the task it gets a freejoint and a soft weld to a mocap body",
         "(`opend_mj.sim.hands.attach_with_mocap`), so the root moves only through the mocap. Grasp site",
         f"`{spec['grasp_site']}` at {spec['grasp_site_pos']} in the root frame. Mass {spec.get('mass', '?')} kg.",
