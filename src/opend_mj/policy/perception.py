@@ -206,6 +206,33 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEs
                           front_x=front_x, panel_x=panel_x)
 
 
+def door_edges(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,
+               gap_pixels: int = 3) -> tuple[float, float] | None:
+    """World y of where the door's front plane ends to the left (+y) and to the right (-y) of the
+    handle, along the image row through it (the plane the handle stands on)."""
+    h, w = depth.shape
+    uc, vc = view.project(handle.centre[None, :])[0]
+    if not (np.isfinite(uc) and np.isfinite(vc)):
+        return None
+    row = int(np.clip(vc, 0, h - 1))
+    cols = np.arange(w) + 0.5
+    points = view.backproject(cols, np.full(w, row + 0.5), depth[row])
+    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
+    start = int(np.clip(uc, 0, w - 1))
+
+    def reach(step: int) -> float:
+        col, misses, last = start, 0, start
+        while 0 <= col < w and misses <= gap_pixels:
+            if on_plane[col]:
+                last, misses = col, 0
+            else:
+                misses += 1
+            col += step
+        return float(points[last, 1])
+
+    return reach(-1), reach(+1)  # image-left is +y
+
+
 def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,
                      gap_pixels: int = 3) -> str | None:
     """Which side a single door hinges on, from the depth image alone.

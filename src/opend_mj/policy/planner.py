@@ -33,6 +33,7 @@ import numpy as np
 from opend_mj.language import hinge_side, target_kind
 from opend_mj.policy.handle import HandleSolver
 from opend_mj.policy.perception import (
+    door_edges,
     estimate_handle,
     infer_hinge_side,
     measure_handle,
@@ -154,6 +155,8 @@ class PlannerConfig:
     #: doors lost after opening at least ``push_min_turn`` degrees: push them open from inside
     push_recovery: bool = True
     push_min_turn: float = 8.0
+    #: a hinge fitted to the handle's path is believed when within this (m) of the one seen in depth
+    hinge_agreement: float = 0.12
     push_radius_range: tuple = (0.12, 1.2)
     push_clearance: float = 0.14
     push_entry_fraction: float = 0.45
@@ -443,6 +446,11 @@ class Planner:
                 status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
             if status == "done":
                 break
+            if door and cfg.push_recovery:
+                arc = self.door_arc(state)
+                if arc is not None and math.degrees(arc[4]) >= cfg.push_min_turn:
+                    self.back_off(robot, grasp)
+                    break  # an opened door is pushed open from inside (below), not grasped again
             self.back_off(robot, grasp)
             grasp = self.next_grasp(grasp, handle, shape, state, result)
         if door and status != "done" and cfg.push_recovery:
@@ -508,6 +516,9 @@ class Planner:
             result.events.append({"hinge_side": hinge})
             if hinge == "right":
                 quat = quat_mul(quat, yaw_quat(math.pi))
+        self._hinge = None
+        if result.target_kind == "door":
+            self._hinge = self.hinge_from_depth(handle, obs, result)
         style = self.grasp_style(handle, shape)
         depth = float(cfg.grasp_depth.get(style, cfg.grasp_depth.get(_STYLE_KIND[style], 0.0)))
         pos = handle.centre + np.array([depth, 0.0, 0.0])
@@ -530,6 +541,22 @@ class Planner:
         if opening < float(np.max(pre)):
             result.events.append({"gripper_opening": round(opening, 4)})
         return np.minimum(pre, opening)
+
+    def hinge_from_depth(self, handle, obs: Observation, result: PlanResult):
+        """The door's hinge line (world x, y) from the depth image: on the hinge side (named by the
+        instruction, else inferred), where the door's front plane ends, at the panel's depth."""
+        hinge = hinge_side(obs.instruction)
+        if hinge is None:
+            hinge = infer_hinge_side(handle, obs.depth, obs.camera_view)
+        edges = door_edges(handle, obs.depth, obs.camera_view)
+        if hinge is None or edges is None:
+            return None
+        y = edges[0] if hinge == "left" else edges[1]
+        if abs(y - handle.centre[1]) < 0.1:
+            return None
+        point = np.array([handle.panel_x, y])
+        result.events.append({"hinge_from_depth": [round(float(v), 3) for v in point]})
+        return point
 
     def grasp_style(self, handle, shape) -> str:
         """``wrap`` round a knob; ``hook`` behind a bar where the stand-off gap lets the fingers
@@ -712,6 +739,35 @@ class Planner:
                 return "done"
         return "done"
 
+    def door_arc(self, state: PullState):
+        """The door's hinge, the handle's radius, its start angle, the sense of opening and how far
+        it opened (rad): from the handle's held path (a fitted circle) where that agrees with the
+        hinge seen in depth, else from the hinge seen in depth. None when neither is known."""
+        cfg = self.config
+        if len(state.track) < 8:
+            return None
+        track = np.array(state.track)
+        p0 = track[0]
+        seen = getattr(self, "_hinge", None)
+        fit = fit_circle_xy(track) if abs(state.turned) >= cfg.push_min_turn else None
+        centre = None
+        if fit is not None:
+            c, r = fit
+            plausible = cfg.push_radius_range[0] <= r <= cfg.push_radius_range[1]
+            if seen is not None:
+                plausible &= float(np.linalg.norm(c - seen)) < cfg.hinge_agreement
+            if plausible:
+                centre = c
+        if centre is None and seen is not None:
+            centre = np.asarray(seen, float)
+        if centre is None:
+            return None
+        radius = float(np.linalg.norm(p0[:2] - centre))
+        a0 = math.atan2(p0[1] - centre[1], p0[0] - centre[0])
+        a_now = math.atan2(track[-1][1] - centre[1], track[-1][0] - centre[0])
+        sense = 1.0 if _wrap(a_now - a0) > 0 else -1.0
+        return centre, radius, a0, sense, abs(_wrap(a_now - a0))
+
     def recover_door(self, robot: Robot, state: PullState, result: PlanResult) -> bool:
         """A door that opened and was lost: push it open from inside with the hand alone.
 
@@ -719,22 +775,17 @@ class Planner:
         the door's free edge into the gap between door and cabinet, palm toward the door's inside,
         and sweeps along the arc, pushing the door open by contact."""
         cfg = self.config
-        if len(state.track) < 8 or abs(state.turned) < cfg.push_min_turn:
+        arc = self.door_arc(state)
+        if arc is None:
             return False
-        fit = fit_circle_xy(np.array(state.track))
-        if fit is None:
+        centre, radius, a0, sense, opened = arc
+        if math.degrees(opened) < cfg.push_min_turn or not (cfg.push_radius_range[0] <= radius <= cfg.push_radius_range[1]):
+            result.events.append({"push_skipped": {"opened_deg": round(math.degrees(opened), 1), "radius": round(radius, 3)}})
             return False
-        centre, radius = fit
-        if not (cfg.push_radius_range[0] <= radius <= cfg.push_radius_range[1]):
-            result.events.append({"push_skipped_radius": round(radius, 3)})
-            return False
-        self._stage(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3))
         p0 = state.track[0]
+        self._stage(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
+                    opened_deg=round(math.degrees(opened), 1))
         z = float(p0[2])
-        a0 = math.atan2(p0[1] - centre[1], p0[0] - centre[0])
-        a_now = math.atan2(state.track[-1][1] - centre[1], state.track[-1][0] - centre[0])
-        sense = 1.0 if _wrap(a_now - a0) > 0 else -1.0
-        opened = abs(_wrap(a_now - a0))
 
         def point(rho, phi):
             a = a0 + sense * phi
