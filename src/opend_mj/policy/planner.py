@@ -140,10 +140,17 @@ class PlannerConfig:
     probe_min: float = 0.012
     probe_speed: float = 0.08
     touch_min: float = 0.3
+    #: touch is judged over a window (s): held when a finger touched in at least ``touch_hits`` of
+    #: its control steps (contacts on a held bar come and go from one step to the next)
+    touch_window: float = 0.15
+    touch_hits: int = 3
     hold_parts: dict = field(default_factory=lambda: {"parallel_gripper": 2, "dexterous": 1})
     load_excludes: tuple = ("palm", "wrist", "other")
-    #: during the pull: no touch at all (palm included) for this long (s) is a lost grip
+    #: during the pull: no touch at all (palm included) for this long (s) ...
     slip_time: float = 0.4
+    #: ... and the hand moved this far (m) since it last touched: a lightly damped drawer yanked by
+    #: the fingers coasts along with the hand, out of contact, for a while
+    slip_distance: float = 0.1
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
     drawer_done: float = 0.25
     door_done_deg: float = 80.0
@@ -610,16 +617,22 @@ class Planner:
         start = robot.site_pos()
         n = max(1, int(math.ceil(cfg.probe_distance / (cfg.probe_speed * robot.control_dt))))
         back = -g.axis
-        held, touch = False, {}
+        # contacts on a held bar come and go from step to step: judge over a window of steps
+        window = max(1, int(round(cfg.touch_window / robot.control_dt)))
+        recent: list[bool] = []
+        touch: dict = {}
+        held = False
         for i in range(1, n + 1):
             robot.step(start + back * cfg.probe_distance * i / n, g.quat, g.closed)
             if cfg.probe_distance * i / n >= cfg.probe_min:
-                held, touch = self.holding(robot)
-                if held:
+                now, t = self.holding(robot)
+                touch = t if now or not touch else touch
+                recent = (recent + [now])[-window:]
+                if sum(recent) >= cfg.touch_hits:
+                    held = True
                     break
-        if held:  # still holding after a moment: not a touch in passing
-            self._hold(robot, robot.site_pos(), g.quat, g.closed, 0.1)
-            held, touch = self.holding(robot)
+        if not held:
+            held = sum(recent) >= 1
         result.events.append({"verify": {"attempt": g.attempt, "held": held,
                                          "touch": {k: round(v, 1) for k, v in touch.items() if v > 0.1}}})
         return held
@@ -658,7 +671,7 @@ class Planner:
 
     def pull(self, robot: Robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
         """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
-        the hand touches nothing for ``slip_time`` while it moves)."""
+        the hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did)."""
         cfg = self.config
         self._stage(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
@@ -673,6 +686,7 @@ class Planner:
         grip = robot.finger_qpos()  # the fingers as they closed on the handle
         grip_tolerance = cfg.grip_lost_change.get(self.spec.hand_type)
         quiet = 0
+        last_touch = None
         direction = state.direction
         start_travel = state.travelled
         for k in range(max_steps):
@@ -687,7 +701,10 @@ class Planner:
                 held, touch = self.holding(robot)
                 touching = held or any(v > cfg.touch_min for v in touch.values())
                 quiet = quiet + 1 if not touching else 0
-                if quiet >= slip_n and state.travelled - start_travel > cfg.probe_min:
+                if touching or last_touch is None:
+                    last_touch = site.copy()
+                away = float(np.linalg.norm(site - last_touch))
+                if quiet >= slip_n and away >= cfg.slip_distance:
                     result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
                     return "slipped"
                 if held:
