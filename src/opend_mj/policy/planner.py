@@ -154,9 +154,12 @@ class PlannerConfig:
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
     drawer_done: float = 0.25
     door_done_deg: float = 80.0
-    #: re-grasp: back off this far (m); with nothing held before, go this much deeper per try (m)
+    #: re-grasp: back off this far (m); where the grip last held, go this much deeper per try (m)
     backoff_distance: float = 0.06
     regrasp_deeper: float = 0.008
+    #: with nothing held yet, the n-th re-grasp goes this far (m) along the approach axis from the
+    #: first grasp (a thin bar seen in a few pixels may be nearer or farther than estimated)
+    regrasp_offsets: tuple = (-0.012, 0.010)
     #: a deliberate miss of the first grasp (m, world offset; tests of the re-grasp)
     first_grasp_offset: tuple | None = None
     #: doors lost after opening at least ``push_min_turn`` degrees: push them open from inside
@@ -534,6 +537,7 @@ class Planner:
         if self.spec.hand_type == "parallel_gripper":
             pre = self.gripper_opening(pre, orientation, shape, result)
         grasp = GraspChoice(style, orientation, quat, pos, pre, closed)
+        self._first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
 
@@ -646,16 +650,18 @@ class Planner:
                    self.config.approach_speed * 2)
 
     def next_grasp(self, g: GraspChoice, handle, shape, state: PullState, result: PlanResult) -> GraspChoice:
-        """The next try: where the grip last held (the handle moved with the part), else at the handle
-        again with the fingers a little deeper behind it."""
+        """The next try: where the grip last held (the handle moved with the part), a little deeper;
+        else at the handle again, nearer then farther than the first try."""
         deeper = self.config.regrasp_deeper * (g.attempt + 1)
         if state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
             pos, quat = state.last_held
             quat = np.asarray(quat, float)
             new = GraspChoice(g.style, g.orientation, quat, np.asarray(pos, float) + deeper * quat_axis_z(quat),
                               g.pre, g.closed, g.attempt + 1)
-        else:
-            new = GraspChoice(g.style, g.orientation, g.quat, g.pos + deeper * g.axis, g.pre, g.closed,
+        else:  # nothing held yet: the bar may be nearer or farther than seen; try nearer, then farther
+            steps = self.config.regrasp_offsets
+            shift = steps[min(g.attempt, len(steps) - 1)]
+            new = GraspChoice(g.style, g.orientation, g.quat, self._first_pos + shift * g.axis, g.pre, g.closed,
                               g.attempt + 1)
         result.events.append({"regrasp": new.to_dict()})
         return new
