@@ -151,6 +151,9 @@ class PlannerConfig:
     #: ... and the hand moved this far (m) since it last touched: a lightly damped drawer yanked by
     #: the fingers coasts along with the hand, out of contact, for a while
     slip_distance: float = 0.1
+    #: drawers too? (off: a drawer yanked out of contact coasts on, and pulling on finds it again
+    #: more often than a re-grasp does; drawers are re-grasped only when the first grasp held nothing)
+    drawer_slips: bool = False
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
     drawer_done: float = 0.25
     door_done_deg: float = 80.0
@@ -710,7 +713,7 @@ class Planner:
                 if touching or last_touch is None:
                     last_touch = site.copy()
                 away = float(np.linalg.norm(site - last_touch))
-                if quiet >= slip_n and away >= cfg.slip_distance:
+                if quiet >= slip_n and away >= cfg.slip_distance and (door or cfg.drawer_slips):
                     result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
                     return "slipped"
                 if held:
