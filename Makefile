@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate install system-deps assets test bench bench-quick bench-assets bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate eval-real install system-deps assets test bench bench-quick bench-assets bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -20,6 +20,20 @@ evaluate: install
 		--cabinets $(CABINETS) --out $(QUICKSTART_OUT)/oracle_allegro_test.jsonl
 	$(BIN)/opend score $(QUICKSTART_OUT)/oracle_allegro_test.jsonl \
 		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
+
+## Real cabinets: compile your PartNet-Mobility folder (SOURCE=..., optionally IDS=a,b,c), run the
+## oracle planner with all four hands on every target, and score it. The build's hash split is the
+## train part (tune on it) and the test part (report it as validation). Outputs stay under build/
+## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository.
+SOURCE ?= ../shared/opend-train
+REAL_CABINETS ?= build/real-cabinets
+REAL_OUT ?= build/real-results
+eval-real: install
+	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
+	mkdir -p $(REAL_OUT)
+	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split all \
+		--workers $(WORKERS) --cabinets $(REAL_CABINETS) --out $(REAL_OUT)/oracle_real.jsonl
+	$(BIN)/opend score $(REAL_OUT)/oracle_real.jsonl --csv $(REAL_OUT)/scores.csv --plot $(REAL_OUT)/scores.png
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

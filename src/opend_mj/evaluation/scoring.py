@@ -127,6 +127,21 @@ def report_markdown(records: list[dict]) -> str:
             lines.append(f"| {hand} | {solver} | {split} | {len(fails)} | "
                          + " | ".join(str(c.get(s, 0)) for s in STAGE_ORDER) + " |")
     lines.append("")
+    lines.append("## Re-grasps per episode and doors pushed open from inside")
+    lines.append("")
+    lines.append("| hand | solver | split | episodes | mean re-grasps | episodes with a re-grasp | successes after a re-grasp | doors pushed (successes) |")
+    lines.append("|---|---|---|---|---|---|---|---|")
+    for (hand, solver), recs in groups(records).items():
+        for split in SPLITS:
+            sel = [r for r in recs if r.get("split") == split and "error" not in r]
+            if not sel:
+                continue
+            n_re = [int(r.get("regrasps") or 0) for r in sel]
+            again = [r for r in sel if int(r.get("regrasps") or 0) > 0]
+            pushed = [r for r in sel if r.get("pushed")]
+            lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {sum(n_re) / len(sel):.2f} | {len(again)} | "
+                         f"{sum(_ok(r, 0.2) for r in again)} | {len(pushed)} ({sum(_ok(r, 0.2) for r in pushed)}) |")
+    lines.append("")
     lines.append("## Wrong targets opened")
     lines.append("")
     lines.append("| hand | solver | split | episodes | with another target moved | of which successes |")

@@ -28,6 +28,95 @@ class HandleEstimate:
                 "front_x": round(self.front_x, 4), "panel_x": round(self.panel_x, 4)}
 
 
+@dataclass
+class HandleShape:
+    """The handle as measured in depth (metres): what a grasp is chosen from.
+
+    ``thickness``: the bar's extent across its long axis; ``length``: along it; ``gap``: free space
+    between the back of the bar and the panel (protrusion less thickness); ``protrusion``: front of
+    the handle to the panel; ``clear``: free distance from the handle's box to the nearest other
+    thing standing out of the panel (another handle, a frame), per side of the handle in the world
+    (``up``, ``down``, ``left`` = +y, ``right`` = -y), capped at the search radius."""
+
+    thickness: float
+    length: float
+    gap: float
+    protrusion: float
+    clear: dict
+
+    def to_dict(self) -> dict:
+        return {"thickness": round(self.thickness, 4), "length": round(self.length, 4), "gap": round(self.gap, 4),
+                "protrusion": round(self.protrusion, 4), "clear": {k: round(v, 3) for k, v in self.clear.items()}}
+
+
+def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, view, radius: float = 0.15,
+                   min_protrusion: float = 0.008) -> HandleShape:
+    """Bar thickness, length, stand-off gap and the free space around the handle, from depth alone."""
+    h, w = depth.shape
+    # pixels per metre at the handle's distance (to size the search window)
+    uc, vc = box.centre
+    p0 = _ray_plane_x(view, uc, vc, handle.front_x)
+    p1 = _ray_plane_x(view, uc + 10.0, vc, handle.front_x)
+    px_per_m = 10.0 / max(1e-6, float(np.linalg.norm(p1 - p0)))
+    m = int(math.ceil(radius * px_per_m))
+    u0, v0 = int(max(0, math.floor(box.u0) - m)), int(max(0, math.floor(box.v0) - m))
+    u1, v1 = int(min(w, math.ceil(box.u1) + m)), int(min(h, math.ceil(box.v1) + m))
+    vv, uu = np.meshgrid(np.arange(v0, v1) + 0.5, np.arange(u0, u1) + 0.5, indexing="ij")
+    d = depth[v0:v1, u0:u1]
+    ok = np.isfinite(d) & (d > 0.05)
+    pts = view.backproject(uu, vv, np.where(ok, d, 1.0))
+    x = np.where(ok, pts[..., 0], np.inf)
+    in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
+    # the panel: the most common depth just around the box (a tight box may hold only the bar)
+    g = 0.04 * px_per_m
+    ring = ok & ~in_box & (uu >= box.u0 - g) & (uu <= box.u1 + g) & (vv >= box.v0 - g) & (vv <= box.v1 + g)
+    panel_x = float(np.median(x[ring])) if ring.sum() >= 5 else handle.panel_x
+    panel_x = max(panel_x, handle.front_x)
+    # the bar: pixels in the box within a few mm of the handle's front
+    bar = in_box & (x < handle.front_x + 0.006)
+    m_per_px = 1.0 / px_per_m
+    if bar.sum() >= 2:
+        # extents in pixels (rows / columns covered), then metres: area / length for the thickness
+        n_cols = int(np.any(bar, axis=0).sum())
+        n_rows = int(np.any(bar, axis=1).sum())
+        across_h = bar.sum() / max(1, n_cols)  # mean bar height per column (a horizontal bar)
+        across_v = bar.sum() / max(1, n_rows)  # mean bar width per row (a vertical bar)
+        ext_y, ext_z = n_cols * m_per_px, n_rows * m_per_px
+    else:
+        ext_y, ext_z = handle.size
+        across_h, across_v = ext_z * px_per_m, ext_y * px_per_m
+    if handle.orientation == "horizontal":
+        length, thickness = ext_y, across_h * m_per_px
+    else:
+        length, thickness = ext_z, across_v * m_per_px
+    if handle.kind == "knob":
+        thickness = length = max(ext_y, ext_z)
+    protrusion = max(0.0, panel_x - handle.front_x)
+    gap = max(0.0, protrusion - thickness)
+    # neighbours: anything else standing out of the panel near the handle
+    proud = ok & (x < panel_x - min_protrusion) & ~in_box
+    grown = (uu >= box.u0 - 0.01 * px_per_m) & (uu <= box.u1 + 0.01 * px_per_m) & \
+            (vv >= box.v0 - 0.01 * px_per_m) & (vv <= box.v1 + 0.01 * px_per_m)
+    proud &= ~grown
+    lo = _ray_plane_x(view, box.u1, box.v1, handle.front_x)  # image right / bottom corner
+    hi = _ray_plane_x(view, box.u0, box.v0, handle.front_x)  # image left / top corner
+    y_lo, y_hi = min(lo[1], hi[1]), max(lo[1], hi[1])
+    z_lo, z_hi = min(lo[2], hi[2]), max(lo[2], hi[2])
+    clear = {"up": radius, "down": radius, "left": radius, "right": radius}
+    if proud.any():
+        q = pts[proud]
+        band_z = (q[:, 2] > z_lo - 0.03) & (q[:, 2] < z_hi + 0.03)
+        band_y = (q[:, 1] > y_lo - 0.03) & (q[:, 1] < y_hi + 0.03)
+        for key, sel, dist in (("left", band_z & (q[:, 1] > y_hi), q[:, 1] - y_hi),
+                               ("right", band_z & (q[:, 1] < y_lo), y_lo - q[:, 1]),
+                               ("up", band_y & (q[:, 2] > z_hi), q[:, 2] - z_hi),
+                               ("down", band_y & (q[:, 2] < z_lo), z_lo - q[:, 2])):
+            if sel.any():
+                clear[key] = float(min(radius, np.min(dist[sel])))
+    return HandleShape(thickness=float(thickness), length=float(length), gap=float(gap),
+                       protrusion=float(protrusion), clear=clear)
+
+
 def _ray_plane_x(view, u: float, v: float, x: float) -> np.ndarray:
     """World point where the camera ray through pixel (u, v) meets the plane of constant x."""
     p1 = view.backproject(u, v, 1.0)
@@ -115,6 +204,33 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEs
     kind = "knob" if (long_ / short < config.knob_aspect and long_ < config.knob_size) else "bar"
     return HandleEstimate(centre=centre, orientation=orientation, kind=kind, size=(size_y, size_z),
                           front_x=front_x, panel_x=panel_x)
+
+
+def door_edges(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,
+               gap_pixels: int = 3) -> tuple[float, float] | None:
+    """World y of where the door's front plane ends to the left (+y) and to the right (-y) of the
+    handle, along the image row through it (the plane the handle stands on)."""
+    h, w = depth.shape
+    uc, vc = view.project(handle.centre[None, :])[0]
+    if not (np.isfinite(uc) and np.isfinite(vc)):
+        return None
+    row = int(np.clip(vc, 0, h - 1))
+    cols = np.arange(w) + 0.5
+    points = view.backproject(cols, np.full(w, row + 0.5), depth[row])
+    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
+    start = int(np.clip(uc, 0, w - 1))
+
+    def reach(step: int) -> float:
+        col, misses, last = start, 0, start
+        while 0 <= col < w and misses <= gap_pixels:
+            if on_plane[col]:
+                last, misses = col, 0
+            else:
+                misses += 1
+            col += step
+        return float(points[last, 1])
+
+    return reach(-1), reach(+1)  # image-left is +y
 
 
 def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,

@@ -33,8 +33,10 @@ import numpy as np
 from opend_mj.language import hinge_side, target_kind
 from opend_mj.policy.handle import HandleSolver
 from opend_mj.policy.perception import (
+    door_edges,
     estimate_handle,
     infer_hinge_side,
+    measure_handle,
     refine_box_with_depth,
 )
 from opend_mj.sim.hands import (
@@ -52,7 +54,7 @@ from opend_mj.transforms import (
 )
 
 GRASP_FILE = "grasp.json"
-STAGES = ("locate", "approach", "grasp", "pull")
+STAGES = ("locate", "approach", "grasp", "pull", "recover")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -115,8 +117,64 @@ class PlannerConfig:
     knob_size: float = 0.055
     #: horizontal handles lower than this (m) are grasped with the fingers pointing down
     flip_below: float = 0.2
-    #: handle radius assumed when turning the front surface seen in depth into a centre (m)
+    #: largest half-thickness of a bar: the grip centre is the front seen in depth plus the measured
+    #: half thickness, at most this (m)
     handle_radius: float = 0.007
+    #: grasp style: a bar whose stand-off gap (m) is below this is pinched rather than wrapped
+    pinch_gap: dict = field(default_factory=lambda: {"parallel_gripper": 0.0, "dexterous": 0.012})
+    #: parallel gripper: a finger's width outside its pad (m), the margin kept to a neighbour (m), and
+    #: the least clearance between an open pad and the bar (m)
+    gripper_finger_width: float = 0.021
+    neighbour_margin: float = 0.005
+    gripper_min_clearance: float = 0.008
+    #: closed loop: grasp tries per episode, the episode's time budget (s), the time one more try needs
+    max_grasp_tries: int = 3
+    max_time: float = 24.0
+    attempt_time: float = 3.0
+    #: verification: after closing, pull back this far (m) at this speed (m/s); the grip holds when
+    #: at least ``hold_parts`` fingers (per hand type; the thumb counts, the palm does not) still press
+    #: on something with more than ``touch_min`` N (fingertips that pressed on the panel behind a thin
+    #: bar leave it when the hand pulls back; fingers round a handle do not)
+    verify_grasp: bool = True
+    probe_distance: float = 0.04
+    probe_min: float = 0.012
+    probe_speed: float = 0.08
+    touch_min: float = 0.3
+    #: touch is judged over a window (s): held when a finger touched in at least ``touch_hits`` of
+    #: its control steps (contacts on a held bar come and go from one step to the next)
+    touch_window: float = 0.15
+    touch_hits: int = 3
+    hold_parts: dict = field(default_factory=lambda: {"parallel_gripper": 2, "dexterous": 1})
+    load_excludes: tuple = ("palm", "wrist", "other")
+    #: during the pull: no touch at all (palm included) for this long (s) ...
+    slip_time: float = 0.4
+    #: ... and the hand moved this far (m) since it last touched: a lightly damped drawer yanked by
+    #: the fingers coasts along with the hand, out of contact, for a while
+    slip_distance: float = 0.1
+    #: drawers too? (off: a drawer yanked out of contact coasts on, and pulling on finds it again
+    #: more often than a re-grasp does; drawers are re-grasped only when the first grasp held nothing)
+    drawer_slips: bool = False
+    #: a grip lost beyond this much travel (drawers, m) or turn (doors, degrees) is a finished pull
+    drawer_done: float = 0.25
+    door_done_deg: float = 80.0
+    #: re-grasp: back off this far (m); where the grip last held, go this much deeper per try (m)
+    backoff_distance: float = 0.06
+    regrasp_deeper: float = 0.008
+    #: with nothing held yet, the n-th re-grasp goes this far (m) along the approach axis from the
+    #: first grasp (a thin bar seen in a few pixels may be nearer or farther than estimated)
+    regrasp_offsets: tuple = (-0.012, 0.010)
+    #: a deliberate miss of the first grasp (m, world offset; tests of the re-grasp)
+    first_grasp_offset: tuple | None = None
+    #: doors lost after opening at least ``push_min_turn`` degrees: push them open from inside
+    push_recovery: bool = True
+    push_min_turn: float = 8.0
+    #: a hinge fitted to the handle's path is believed when within this (m) of the one seen in depth
+    hinge_agreement: float = 0.12
+    push_radius_range: tuple = (0.12, 1.2)
+    push_clearance: float = 0.14
+    push_entry_fraction: float = 0.45
+    push_radius_fraction: float = 0.85
+    push_to_deg: float = 125.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -179,6 +237,28 @@ class Robot:
         self._data = self.physics.data.ptr
         self._site_id = int(self.physics.bind(self.task.hand.grasp_site).element_id)
         self._finger_qpos = np.array([int(a) for a in self.physics.bind(self.task.hand.joints).qposadr])
+        # touch sensors (the hand's own state): sensordata address of each, and its part
+        model = self.task.hand.mjcf_model
+        self.touch_parts: list[str] = []
+        adrs = []
+        for name, part in self.spec.touch_sensors.items():
+            sensor = model.find("sensor", name)
+            if sensor is None:
+                continue
+            sid = int(self.physics.bind(sensor).element_id)
+            adrs.append(int(self.physics.model.sensor_adr[sid]))
+            self.touch_parts.append(part)
+        self._touch_adr = np.array(adrs, dtype=int)
+        # the geom under each touch site, and every geom of the hand (its own contacts are not touch)
+        m = self.physics.model.ptr
+        self._geom_part: dict[int, str] = {}
+        for name, part in self.spec.touch_sensors.items():
+            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
+            if geom is not None:
+                self._geom_part[int(self.physics.bind(geom).element_id)] = part
+        hand_bodies = {int(b) for b in self.physics.bind(model.find_all("body")).element_id}
+        self._hand_geom = np.isin(m.geom_bodyid, list(hand_bodies))
+        self._force6 = np.zeros(6)
 
     @property
     def control_dt(self) -> float:
@@ -198,6 +278,32 @@ class Robot:
 
     def finger_qpos(self) -> np.ndarray:
         return self._data.qpos[self._finger_qpos]
+
+    def touch(self) -> dict[str, float]:
+        """Normal force (N) on each part of the hand (palm, thumb, each finger), from its touch sensors."""
+        out: dict[str, float] = {}
+        values = self._data.sensordata[self._touch_adr] if len(self._touch_adr) else []
+        for part, v in zip(self.touch_parts, values):
+            out[part] = out.get(part, 0.0) + float(v)
+        return out
+
+    def contact_touch(self) -> dict[str, float]:
+        """Normal force (N) on each part of the hand from things that are not the hand: what its
+        touch sensors feel, less the hand's own contacts (a thumb pressing on a finger)."""
+        import mujoco
+
+        d, m = self._data, self.physics.model.ptr
+        out: dict[str, float] = {}
+        for i in range(d.ncon):
+            c = d.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
+            if h1 == h2:
+                continue
+            part = self._geom_part.get(g1 if h1 else g2, "other")  # a geom without a touch site
+            mujoco.mj_contactForce(m, d, i, self._force6)
+            out[part] = out.get(part, 0.0) + abs(float(self._force6[0]))
+        return out
 
     def step(self, site_pos, site_quat, fingers) -> None:
         """One control step toward a grasp-site target pose (converted to the root target)."""
@@ -222,14 +328,58 @@ class PlanResult:
     target_kind: str = ""
     pulled: float = 0.0  # how far the grasp site travelled while pulling (m)
     turned_deg: float = 0.0  # how much the pull direction turned (doors)
+    regrasps: int = 0  # grasps tried after the first
+    grasp_style: str = ""
+    shape: dict | None = None  # the handle as measured in depth
+    pushed: bool = False  # a lost door was pushed open from inside
     events: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
+@dataclass
+class GraspChoice:
+    """One grasp: the style chosen from the handle's shape, the site pose and the finger targets."""
+
+    style: str  # "hook" (behind a bar with room), "pinch" (a bar close to its panel), "wrap" (a knob)
+    orientation: str
+    quat: np.ndarray
+    pos: np.ndarray
+    pre: np.ndarray
+    closed: np.ndarray
+    attempt: int = 0
+
+    @property
+    def axis(self) -> np.ndarray:
+        """The approach direction (site +z)."""
+        return quat_axis_z(self.quat)
+
+    def to_dict(self) -> dict:
+        return {"style": self.style, "orientation": self.orientation, "attempt": self.attempt,
+                "pos": [round(float(x), 4) for x in self.pos]}
+
+
+@dataclass
+class PullState:
+    """What a pull knows and keeps across re-grasps: its direction, turn and the held track."""
+
+    quat0: np.ndarray
+    direction: np.ndarray = field(default_factory=lambda: np.array([-1.0, 0.0, 0.0]))
+    base_dir: np.ndarray = field(default_factory=lambda: np.array([-1.0, 0.0, 0.0]))
+    turned: float = 0.0
+    travelled: float = 0.0
+    track: list = field(default_factory=list)  # site positions while the grip held
+    last_held: tuple | None = None  # (site pos, site quat) the last time the grip held
+
+
 class Planner:
-    """Deterministic open-the-handle controller around a handle solver."""
+    """Deterministic open-the-handle controller around a handle solver.
+
+    Stages (each a method): :meth:`locate` (solver box -> 3D handle), :meth:`perceive` (shape from
+    depth), :meth:`choose_grasp`, :meth:`approach`, :meth:`close_and_verify` (touch sensors: does
+    the hand hold?), :meth:`pull` (until done or the grip slips), :meth:`recover` (back off and
+    grasp again; a door that started to open and was lost is pushed open from inside)."""
 
     def __init__(self, solver: HandleSolver, spec: HandSpec, config: PlannerConfig = PlannerConfig(),
                  grasp: GraspProfile | None = None, on_stage: Callable[[str, dict], None] | None = None):
@@ -263,13 +413,86 @@ class Planner:
         closed = self.spec.grasp_profile(orientation)
         return pre + self.config.close_scale * (closed - pre)
 
+    def holding(self, robot: Robot) -> tuple[bool, dict]:
+        """Whether the hand holds something, from touch: at least ``hold_parts`` fingers (thumb
+        not) press on something other than the hand (a thumb alone can hook a bar)."""
+        touch = robot.contact_touch()
+        parts = [k for k, v in touch.items()
+                 if v > self.config.touch_min and k not in self.config.load_excludes]
+        need = self.config.hold_parts.get(self.spec.hand_type, 1)
+        return len(parts) >= need, touch
+
+    def _time_left(self, robot: Robot) -> float:
+        return self.config.max_time - robot.time
+
     # ---------------------------------------------------------------- stages
     def run(self, robot: Robot, obs: Observation) -> PlanResult:
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         result.target_kind = target_kind(obs.instruction)
 
-        # -- locate
+        handle, box = self.locate(robot, obs, result)
+        if handle is None:
+            result.failed_stage = "locate"
+            self._hold_until_min_time(robot, None)
+            return result
+        shape = self.perceive(handle, box, obs, result)
+        grasp = self.choose_grasp(handle, shape, obs, result)
+        door = result.target_kind == "door" and cfg.pull == "arc"
+        state = PullState(quat0=grasp.quat)
+        status = "not_held"
+        for attempt in range(cfg.max_grasp_tries):
+            if attempt > 0 and self._time_left(robot) < cfg.attempt_time:
+                break
+            grasp.attempt = attempt
+            if attempt > 0:
+                result.regrasps += 1
+            self.approach(robot, grasp, result, first=attempt == 0)
+            if not self.close_and_verify(robot, grasp, result):
+                status = "not_held"
+                self.back_off(robot, grasp)
+                grasp = self.next_grasp(grasp, handle, shape, state, result)
+                continue
+            status = self.pull(robot, grasp, door, state, result)
+            if status == "slipped" and (abs(state.turned) >= cfg.door_done_deg if door
+                                        else state.travelled >= cfg.drawer_done):
+                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
+            if status == "done":
+                break
+            if door and cfg.push_recovery:
+                arc = self.door_arc(state)
+                if arc is not None and math.degrees(arc[4]) >= cfg.push_min_turn:
+                    self.back_off(robot, grasp)
+                    break  # an opened door is pushed open from inside (below), not grasped again
+            self.back_off(robot, grasp)
+            grasp = self.next_grasp(grasp, handle, shape, state, result)
+        if door and status != "done" and cfg.push_recovery:
+            self.recover_door(robot, state, result)
+        result.pulled = state.travelled
+        result.turned_deg = state.turned
+        result.grasp_style = grasp.style
+
+        # -- hold (and optionally release), then check
+        site, squat = robot.site_pose()
+        fingers = grasp.closed if status == "done" else self.spec.pregrasp_profile(grasp.orientation)
+        if cfg.release and status == "done":
+            pre = self.spec.pregrasp_profile(grasp.orientation)
+            self._hold(robot, site, squat, grasp.closed, 0.2)
+            self._hold(robot, site, squat, pre, 0.4)
+            self._move(robot, site, site - 0.08 * quat_axis_z(squat), squat, pre, cfg.approach_speed)
+            fingers = pre
+        self._hold_until_min_time(robot, (robot.site_pose()[0], robot.site_pose()[1], fingers))
+        self._stage(result, "check", pulled=round(result.pulled, 4), turned_deg=round(result.turned_deg, 2),
+                    regrasps=result.regrasps)
+        if status == "not_held" and result.pulled < 0.03 and not result.pushed:
+            result.failed_stage = "grasp"
+        elif status != "done" and not result.pushed:
+            result.failed_stage = "pull"
+        return result
+
+    def locate(self, robot: Robot, obs: Observation, result: PlanResult):
+        """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle."""
+        cfg = self.config
         self._stage(result, "locate")
         box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
         if box is not None and cfg.refine_with_depth and not getattr(self.solver, "exact", False):
@@ -277,18 +500,22 @@ class Planner:
             box = refine_box_with_depth(box, obs.depth, obs.camera_view)
         result.box = box.to_dict() if box is not None else None
         handle = estimate_handle(box, obs.depth, obs.camera_view, cfg) if box is not None else None
-        if handle is None:
-            result.failed_stage = "locate"
-            self._hold_until_min_time(robot, None)
-            return result
-        result.handle = handle.to_dict()
+        if handle is not None:
+            result.handle = handle.to_dict()
+        return handle, box
 
-        # -- approach
+    def perceive(self, handle, box, obs: Observation, result: PlanResult):
+        """Thickness, length, stand-off gap and free space around the handle, measured in depth."""
+        shape = measure_handle(handle, box, obs.depth, obs.camera_view)
+        result.shape = shape.to_dict()
+        return shape
+
+    def choose_grasp(self, handle, shape, obs: Observation, result: PlanResult) -> GraspChoice:
+        """Orientation from the handle and the instruction; style from the measured shape."""
+        cfg = self.config
         orientation = handle.orientation
-        if handle.kind == "knob" and self.grasp is not None:
-            orientation = self.grasp.knob_orientation
-        elif handle.kind == "knob":
-            orientation = "horizontal"
+        if handle.kind == "knob":
+            orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
         quat = orientation_for_handle(orientation)
         if orientation == "horizontal" and handle.centre[2] < cfg.flip_below:
             quat = quat_mul(quat, yaw_quat(math.pi))  # fingers down (site frame: rotate about +z)
@@ -302,51 +529,145 @@ class Planner:
             result.events.append({"hinge_side": hinge})
             if hinge == "right":
                 quat = quat_mul(quat, yaw_quat(math.pi))
-        depth = float(cfg.grasp_depth.get(handle.kind, 0.0)) + self.spec.approach_offset * 0.0
-        grasp_pos = handle.centre + np.array([depth, 0.0, 0.0])
-        pre_pos = grasp_pos - np.array([cfg.pregrasp_distance, 0.0, 0.0])
-        pre_fingers = self.spec.pregrasp_profile(orientation)
-        self._stage(result, "approach", site_target=grasp_pos.tolist())
+        self._hinge = None
+        if result.target_kind == "door":
+            self._hinge = self.hinge_from_depth(handle, obs, result)
+        style = self.grasp_style(handle, shape)
+        depth = float(cfg.grasp_depth.get(style, cfg.grasp_depth.get(_STYLE_KIND[style], 0.0)))
+        pos = handle.centre + np.array([depth, 0.0, 0.0])
+        pre = self.spec.pregrasp_profile(orientation)
+        closed = self.closed_profile(orientation)
+        if self.spec.hand_type == "parallel_gripper":
+            pre = self.gripper_opening(pre, orientation, shape, result)
+        grasp = GraspChoice(style, orientation, quat, pos, pre, closed)
+        self._first_pos = pos.copy()
+        result.events.append({"grasp": grasp.to_dict()})
+        return grasp
+
+    def gripper_opening(self, pre: np.ndarray, orientation: str, shape, result: PlanResult) -> np.ndarray:
+        """A parallel gripper opens no wider than the free space beside the handle allows (a
+        neighbouring handle of a double door 5-8 cm away), and never narrower than the bar."""
+        cfg = self.config
+        sides = ("up", "down") if orientation == "horizontal" else ("left", "right")
+        room = min(shape.clear[k] for k in sides) + shape.thickness / 2
+        opening = room - cfg.gripper_finger_width - cfg.neighbour_margin
+        opening = max(opening, shape.thickness / 2 + cfg.gripper_min_clearance)
+        if opening < float(np.max(pre)):
+            result.events.append({"gripper_opening": round(opening, 4)})
+        return np.minimum(pre, opening)
+
+    def hinge_from_depth(self, handle, obs: Observation, result: PlanResult):
+        """The door's hinge line (world x, y) from the depth image: on the hinge side (named by the
+        instruction, else inferred), where the door's front plane ends, at the panel's depth."""
+        hinge = hinge_side(obs.instruction)
+        if hinge is None:
+            hinge = infer_hinge_side(handle, obs.depth, obs.camera_view)
+        edges = door_edges(handle, obs.depth, obs.camera_view)
+        if hinge is None or edges is None:
+            return None
+        y = edges[0] if hinge == "left" else edges[1]
+        if abs(y - handle.centre[1]) < 0.1:
+            return None
+        point = np.array([handle.panel_x, y])
+        result.events.append({"hinge_from_depth": [round(float(v), 3) for v in point]})
+        return point
+
+    def grasp_style(self, handle, shape) -> str:
+        """``wrap`` round a knob; ``hook`` behind a bar where the stand-off gap lets the fingers
+        through; ``pinch`` across a bar too close to its panel (or a flat pull)."""
+        if handle.kind == "knob":
+            return "wrap"
+        if shape.gap < self.config.pinch_gap.get(self.spec.hand_type, 0.0):
+            return "pinch"
+        return "hook"
+
+    def approach(self, robot: Robot, g: GraspChoice, result: PlanResult, first: bool = True) -> float:
+        """Open hand to the pre-grasp in front of the handle (along the approach axis), then in."""
+        cfg = self.config
+        target = g.pos.copy()
+        if first and cfg.first_grasp_offset is not None:  # a deliberate miss (tests)
+            target = target + np.asarray(cfg.first_grasp_offset, float)
+        axis = g.axis
+        pre_pos = target - cfg.pregrasp_distance * axis
+        self._stage(result, "approach", site_target=target.tolist(), attempt=g.attempt)
         site0, _ = robot.site_pose()
-        # rotate in place (open hand), then move at the start depth, then to the pre-grasp, then in
-        self._hold(robot, site0, quat, pre_fingers, 0.3)
-        waypoint = np.array([min(site0[0], pre_pos[0]), pre_pos[1], pre_pos[2]])
-        self._move(robot, site0, waypoint, quat, pre_fingers, cfg.move_speed)
-        self._move(robot, waypoint, pre_pos, quat, pre_fingers, cfg.move_speed)
-        self._hold(robot, pre_pos, quat, pre_fingers, 0.15)
-        self._move(robot, pre_pos, grasp_pos, quat, pre_fingers, cfg.approach_speed)
-        self._hold(robot, grasp_pos, quat, pre_fingers, 0.15)
-        site, _ = robot.site_pose()
-        err = float(np.linalg.norm(site - grasp_pos))
+        self._hold(robot, site0, g.quat, g.pre, 0.3 if first else 0.15)
+        if first:  # move at the start depth, then to the pre-grasp
+            waypoint = np.array([min(site0[0], pre_pos[0]), pre_pos[1], pre_pos[2]])
+            self._move(robot, site0, waypoint, g.quat, g.pre, cfg.move_speed)
+            self._move(robot, waypoint, pre_pos, g.quat, g.pre, cfg.move_speed)
+        else:
+            self._move(robot, site0, pre_pos, g.quat, g.pre, cfg.move_speed)
+        self._hold(robot, pre_pos, g.quat, g.pre, 0.15)
+        self._move(robot, pre_pos, target, g.quat, g.pre, cfg.approach_speed)
+        self._hold(robot, target, g.quat, g.pre, 0.15)
+        err = float(np.linalg.norm(robot.site_pos() - target))
         if err > 0.03:  # blocked on the way in (the hand's own state says so)
             result.events.append({"approach_error": round(err, 4)})
+        self._approach_target = target
+        return err
 
-        # -- close fingers
-        self._stage(result, "grasp")
-        closed = self.closed_profile(orientation)
+    def close_and_verify(self, robot: Robot, g: GraspChoice, result: PlanResult) -> bool:
+        """Close the fingers, then pull a little: a held handle pushes back on the fingers (the touch
+        sensors' load rises); a hand that closed on air or on the panel feels nothing more."""
+        cfg = self.config
+        self._stage(result, "grasp", attempt=g.attempt)
+        target = self._approach_target
         close_time = cfg.close_time if cfg.close_time is not None else self.spec.close_time
         n = max(1, int(round(close_time / robot.control_dt)))
         for i in range(1, n + 1):
-            robot.step(grasp_pos, quat, pre_fingers + (closed - pre_fingers) * i / n)
-        self._hold(robot, grasp_pos, quat, closed, cfg.settle_time)
+            robot.step(target, g.quat, g.pre + (g.closed - g.pre) * i / n)
+        self._hold(robot, target, g.quat, g.closed, cfg.settle_time)
+        if not cfg.verify_grasp:
+            return True
+        # pull back up to ``probe_distance``: a bar loose in a curled hand engages within a few cm
+        start = robot.site_pos()
+        n = max(1, int(math.ceil(cfg.probe_distance / (cfg.probe_speed * robot.control_dt))))
+        back = -g.axis
+        # contacts on a held bar come and go from step to step: judge over a window of steps
+        window = max(1, int(round(cfg.touch_window / robot.control_dt)))
+        recent: list[bool] = []
+        touch: dict = {}
+        held = False
+        for i in range(1, n + 1):
+            robot.step(start + back * cfg.probe_distance * i / n, g.quat, g.closed)
+            if cfg.probe_distance * i / n >= cfg.probe_min:
+                now, t = self.holding(robot)
+                touch = t if now or not touch else touch
+                recent = (recent + [now])[-window:]
+                if sum(recent) >= cfg.touch_hits:
+                    held = True
+                    break
+        if not held:
+            held = sum(recent) >= 1
+        result.events.append({"verify": {"attempt": g.attempt, "held": held,
+                                         "touch": {k: round(v, 1) for k, v in touch.items() if v > 0.1}}})
+        return held
 
-        # -- pull
-        self._stage(result, "pull")
-        door = result.target_kind == "door" and cfg.pull == "arc"
-        self._pull(robot, quat, closed, door, result)
-
-        # -- hold (and optionally release), then check
+    def back_off(self, robot: Robot, g: GraspChoice) -> None:
+        """Open the fingers and move back along the approach axis."""
         site, squat = robot.site_pose()
-        if cfg.release:
-            self._hold(robot, site, squat, closed, 0.2)
-            self._hold(robot, site, squat, pre_fingers, 0.4)
-            direction = -quat_axis_z(squat)
-            self._move(robot, site, site + 0.08 * direction, squat, pre_fingers, cfg.approach_speed)
-        self._hold_until_min_time(robot, (robot.site_pose()[0], squat, closed if not cfg.release else pre_fingers))
-        self._stage(result, "check", pulled=round(result.pulled, 4), turned_deg=round(result.turned_deg, 2))
-        if result.pulled < 0.03:
-            result.failed_stage = "grasp"
-        return result
+        pre = g.pre
+        self._hold(robot, site, squat, pre, 0.25)
+        self._move(robot, site, site - self.config.backoff_distance * quat_axis_z(squat), squat, pre,
+                   self.config.approach_speed * 2)
+
+    def next_grasp(self, g: GraspChoice, handle, shape, state: PullState, result: PlanResult) -> GraspChoice:
+        """The next try: where the grip last held (the handle moved with the part), a little deeper;
+        else at the handle again, nearer then farther than the first try."""
+        deeper = self.config.regrasp_deeper * (g.attempt + 1)
+        if state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
+            pos, quat = state.last_held
+            quat = np.asarray(quat, float)
+            new = GraspChoice(g.style, g.orientation, quat, np.asarray(pos, float) + deeper * quat_axis_z(quat),
+                              g.pre, g.closed, g.attempt + 1)
+        else:  # nothing held yet: the bar may be nearer or farther than seen; try nearer, then farther
+            steps = self.config.regrasp_offsets
+            shift = steps[min(g.attempt, len(steps) - 1)]
+            new = GraspChoice(g.style, g.orientation, g.quat, self._first_pos + shift * g.axis, g.pre, g.closed,
+                              g.attempt + 1)
+        result.events.append({"regrasp": new.to_dict()})
+        return new
 
     def _hold_until_min_time(self, robot: Robot, pose) -> None:
         if pose is None:
@@ -357,29 +678,47 @@ class Planner:
         while robot.time < self.config.min_time - 1e-9:
             robot.step(pos, quat, fingers)
 
-    def _pull(self, robot: Robot, quat0, fingers, door: bool, result: PlanResult) -> None:
+    def pull(self, robot: Robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
+        """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
+        the hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did)."""
         cfg = self.config
+        self._stage(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
-        start, _ = robot.site_pose()
-        direction = np.array([-1.0, 0.0, 0.0])
-        base_dir = direction.copy()
+        start = robot.site_pos()
         target = start.copy()
         history = [start.copy()]
-        travelled = 0.0
         travel_max = cfg.door_travel if door else cfg.drawer_travel
         stall_n = max(2, int(round(cfg.stall_time / dt)))
-        quat = quat0
-        turned = 0.0
-        max_steps = int(round((travel_max / cfg.pull_speed + 3.0) / dt))
+        slip_n = max(2, int(round(cfg.slip_time / dt)))
+        quat = g.quat
+        max_steps = int(round((max(0.0, travel_max - state.travelled) / cfg.pull_speed + 3.0) / dt))
         grip = robot.finger_qpos()  # the fingers as they closed on the handle
         grip_tolerance = cfg.grip_lost_change.get(self.spec.hand_type)
+        quiet = 0
+        last_touch = None
+        direction = state.direction
+        start_travel = state.travelled
         for k in range(max_steps):
+            if self._time_left(robot) <= 0.0:
+                return "done"
             site = robot.site_pos()
             if grip_tolerance is not None and float(np.max(np.abs(robot.finger_qpos() - grip))) > grip_tolerance:
-                # the handle forced the fingers open: the grip is lost. Stop here rather than keep
-                # moving a hand that no longer holds anything (it would push the door shut again).
-                result.events.append({"grip_lost_at": round(travelled, 4)})
-                break
+                # the handle forced the fingers open: the grip is lost
+                result.events.append({"grip_lost_at": round(state.travelled, 4)})
+                return "slipped"
+            if cfg.verify_grasp:
+                held, touch = self.holding(robot)
+                touching = held or any(v > cfg.touch_min for v in touch.values())
+                quiet = quiet + 1 if not touching else 0
+                if touching or last_touch is None:
+                    last_touch = site.copy()
+                away = float(np.linalg.norm(site - last_touch))
+                if quiet >= slip_n and away >= cfg.slip_distance and (door or cfg.drawer_slips):
+                    result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
+                    return "slipped"
+                if held:
+                    state.last_held = (site.copy(), quat.copy())
+                    state.track.append(site.copy())
             history.append(site.copy())
             if door and len(history) > cfg.direction_window:
                 motion = history[-1] - history[-1 - cfg.direction_window]
@@ -394,16 +733,18 @@ class Planner:
                         lateral = math.sqrt(max(1e-9, 1 - cand[0] ** 2))
                         cand[1] = math.copysign(lateral, cand[1] if abs(cand[1]) > 1e-9 else 1.0)
                         cand = cand / np.linalg.norm(cand)
+                    base_dir = state.base_dir
                     ang = math.degrees(math.atan2(base_dir[0] * cand[1] - base_dir[1] * cand[0],
                                                   float(base_dir @ cand)))
                     if abs(ang) <= cfg.door_max_turn:
                         direction = cand
-                        turned = ang
+                        state.direction = cand
+                        state.turned = ang
                         yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
-                        quat = turn_about_z(quat0, math.radians(yaw))
+                        quat = turn_about_z(state.quat0, math.radians(yaw))
             pull_dir = direction
-            if door and abs(turned) > 1.0 and cfg.pull_bias_deg:
-                b = math.radians(math.copysign(cfg.pull_bias_deg, turned))
+            if door and abs(state.turned) > 1.0 and cfg.pull_bias_deg:
+                b = math.radians(math.copysign(cfg.pull_bias_deg, state.turned))
                 c, sn = math.cos(b), math.sin(b)
                 pull_dir = np.array([c * direction[0] - sn * direction[1], sn * direction[0] + c * direction[1], 0.0])
             # advance the target along the direction, never more than `lead` ahead of the site
@@ -411,19 +752,127 @@ class Planner:
             ahead = float((target - site) @ pull_dir)
             if ahead > cfg.lead:
                 target = target - pull_dir * (ahead - cfg.lead)
-            # keep the target on the line through the site along the direction (no sideways pull)
             lateral = (target - site) - pull_dir * float((target - site) @ pull_dir)
             target = target - lateral
-            robot.step(target, quat, fingers)
-            travelled = float(np.linalg.norm(site - start)) if not door else travelled + float(
-                np.linalg.norm(history[-1] - history[-2]))
-            if travelled >= travel_max:
-                break
+            robot.step(target, quat, g.closed)
+            if door:
+                state.travelled += float(np.linalg.norm(history[-1] - history[-2]))
+            else:
+                state.travelled = max(state.travelled, start_travel + float(np.linalg.norm(site - start)))
+            if state.travelled >= travel_max:
+                return "done"
             if k > stall_n and float(np.linalg.norm(history[-1] - history[-1 - stall_n])) < cfg.stall_distance:
-                break
-        result.pulled = travelled
-        result.turned_deg = turned
+                return "done"
+        return "done"
+
+    def door_arc(self, state: PullState):
+        """The door's hinge, the handle's radius, its start angle, the sense of opening and how far
+        it opened (rad): from the handle's held path (a fitted circle) where that agrees with the
+        hinge seen in depth, else from the hinge seen in depth. None when neither is known."""
+        cfg = self.config
+        if len(state.track) < 8:
+            return None
+        track = np.array(state.track)
+        p0 = track[0]
+        seen = getattr(self, "_hinge", None)
+        fit = fit_circle_xy(track) if abs(state.turned) >= cfg.push_min_turn else None
+        centre = None
+        if fit is not None:
+            c, r = fit
+            plausible = cfg.push_radius_range[0] <= r <= cfg.push_radius_range[1]
+            if seen is not None:
+                plausible &= float(np.linalg.norm(c - seen)) < cfg.hinge_agreement
+            if plausible:
+                centre = c
+        if centre is None and seen is not None:
+            centre = np.asarray(seen, float)
+        if centre is None:
+            return None
+        radius = float(np.linalg.norm(p0[:2] - centre))
+        a0 = math.atan2(p0[1] - centre[1], p0[0] - centre[0])
+        a_now = math.atan2(track[-1][1] - centre[1], track[-1][0] - centre[0])
+        sense = 1.0 if _wrap(a_now - a0) > 0 else -1.0
+        return centre, radius, a0, sense, abs(_wrap(a_now - a0))
+
+    def recover_door(self, robot: Robot, state: PullState, result: PlanResult) -> bool:
+        """A door that opened and was lost: push it open from inside with the hand alone.
+
+        The hinge comes from the held track (a circle through the handle's path). The hand goes round
+        the door's free edge into the gap between door and cabinet, palm toward the door's inside,
+        and sweeps along the arc, pushing the door open by contact."""
+        cfg = self.config
+        arc = self.door_arc(state)
+        if arc is None:
+            return False
+        centre, radius, a0, sense, opened = arc
+        if math.degrees(opened) < cfg.push_min_turn or not (cfg.push_radius_range[0] <= radius <= cfg.push_radius_range[1]):
+            result.events.append({"push_skipped": {"opened_deg": round(math.degrees(opened), 1), "radius": round(radius, 3)}})
+            return False
+        p0 = state.track[0]
+        self._stage(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
+                    opened_deg=round(math.degrees(opened), 1))
+        z = float(p0[2])
+
+        def point(rho, phi):
+            a = a0 + sense * phi
+            return np.array([centre[0] + rho * math.cos(a), centre[1] + rho * math.sin(a), z])
+
+        def palm_quat(phi):
+            a = a0 + sense * phi
+            radial = np.array([math.cos(a), math.sin(a), 0.0])
+            tangent = sense * np.array([-math.sin(a), math.cos(a), 0.0])  # the opening direction
+            y = np.cross(tangent, radial)
+            return mat_to_quat(np.column_stack([radial, y, tangent]))
+
+        fist = self.closed_profile("vertical")
+        site, squat = robot.site_pose()
+        out = radius + cfg.push_clearance
+        q_out = palm_quat(opened + math.radians(20))
+        # round the free edge: out beyond it, across into the gap, in behind the door
+        b = point(out, opened + math.radians(20))
+        self._move(robot, site, site + np.array([-0.05, 0.0, 0.0]), squat, fist, cfg.move_speed)
+        self._move(robot, robot.site_pos(), b, q_out, fist, cfg.move_speed)
+        phi_in = opened * cfg.push_entry_fraction
+        a = point(out, phi_in)
+        self._move(robot, b, a, palm_quat(phi_in), fist, cfg.approach_speed * 2)
+        rho = radius * cfg.push_radius_fraction
+        c = point(rho, phi_in)
+        self._move(robot, a, c, palm_quat(phi_in), fist, cfg.approach_speed * 2)
+        # sweep: the palm meets the door's inside and pushes it along the arc
+        phi = phi_in
+        phi_end = math.radians(cfg.push_to_deg)
+        dphi = cfg.pull_speed / rho * robot.control_dt
+        while phi < phi_end and self._time_left(robot) > 0.0:
+            phi = min(phi_end, phi + dphi)
+            robot.step(point(rho, phi), palm_quat(phi), fist)
+        result.pushed = True
+        result.events.append({"pushed_to_deg": round(math.degrees(phi), 1)})
+        return True
 
 
-__all__ = ["GRASP_FILE", "STAGES", "GraspProfile", "Observation", "PlanResult", "Planner",
-           "PlannerConfig", "Robot"]
+#: the grasp-profile depth key of each style (``grasp_depth[style]`` wins where the profile has one)
+_STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def fit_circle_xy(points: np.ndarray):
+    """Least-squares circle through points' (x, y): (centre, radius), or None when degenerate."""
+    xy = points[:, :2]
+    A = np.column_stack([2 * xy, np.ones(len(xy))])
+    b = (xy ** 2).sum(axis=1)
+    try:
+        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    cx, cy, c = sol
+    r2 = c + cx * cx + cy * cy
+    if not np.isfinite(r2) or r2 <= 0:
+        return None
+    return np.array([cx, cy]), float(math.sqrt(r2))
+
+
+__all__ = ["GRASP_FILE", "STAGES", "GraspChoice", "GraspProfile", "Observation", "PlanResult", "Planner",
+           "PlannerConfig", "PullState", "Robot", "fit_circle_xy"]

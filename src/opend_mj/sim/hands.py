@@ -74,6 +74,9 @@ class HandSpec:
     joint_ranges: dict[str, list[float]] = field(default_factory=dict)
     joint_roles: dict[str, str] = field(default_factory=dict)
     hand_type: str = "dexterous"
+    #: touch sensors (MuJoCo ``touch``: normal force inside a site around a finger or palm geom),
+    #: sensor name -> the part it belongs to (``palm``, ``thumb``, a finger name)
+    touch_sensors: dict[str, str] = field(default_factory=dict)
     #: extra distance (m) along the approach axis to stop short of the handle (0: site at centre).
     approach_offset: float = 0.0
     #: seconds to ramp from open to closed targets.

@@ -1,0 +1,126 @@
+"""Grasp choice from what the planner sees: synthetic depth images of a panel with a thin bar on
+stand-offs, a wide bar with room behind it, and a knob; the handle's shape is measured in depth and
+the grasp style follows from it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+PANEL_X = 1.0
+
+
+def _view():
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    # camera at the origin looking along +x (columns: right = -y, up = +z, backward = -x)
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+
+
+def _render(view, boxes):
+    """Planar depth of a wall at x = PANEL_X and axis-aligned boxes (lo, hi) in front of it."""
+    cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
+    far = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))  # points at depth 1
+    d = far - view.pos  # ray directions with planar depth 1 per unit t
+    t_best = (PANEL_X - view.pos[0]) / d[:, 0]
+    for lo, hi in boxes:
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (lo - view.pos) / d
+            t2 = (hi - view.pos) / d
+        tmin = np.nanmax(np.minimum(t1, t2), axis=1)
+        tmax = np.nanmin(np.maximum(t1, t2), axis=1)
+        hit = (tmax >= tmin) & (tmin > 0)
+        t_best = np.where(hit & (tmin < t_best), tmin, t_best)
+    return t_best.reshape(256, 256)  # planar depth = t (direction has unit planar depth)
+
+
+def _box_of(view, lo, hi):
+    from opend_mj.policy.handle import HandleBox
+
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    uv = view.project(corners)
+    return HandleBox(uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max())
+
+
+def _bar(thickness, gap, length=0.2, y=0.0, z=0.0, orientation="horizontal"):
+    """A bar whose back is `gap` in front of the panel, with two stand-offs."""
+    back = PANEL_X - gap
+    front = back - thickness
+    if orientation == "horizontal":
+        bar = ((front, y - length / 2, z - thickness / 2), (back, y + length / 2, z + thickness / 2))
+        posts = [((back, y + s * length * 0.4 - 0.004, z - 0.004), (PANEL_X, y + s * length * 0.4 + 0.004, z + 0.004))
+                 for s in (-1, 1)]
+    else:
+        bar = ((front, y - thickness / 2, z - length / 2), (back, y + thickness / 2, z + length / 2))
+        posts = [((back, y - 0.004, z + s * length * 0.4 - 0.004), (PANEL_X, y + 0.004, z + s * length * 0.4 + 0.004))
+                 for s in (-1, 1)]
+    return bar, posts
+
+
+def _choose(hand, boxes, handle_box_world, instruction="top drawer"):
+    from opend_mj.policy.perception import estimate_handle
+    from opend_mj.policy.planner import Observation, PlanResult, Planner, PlannerConfig
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.hands import load_spec
+
+    view = _view()
+    depth = _render(view, boxes)
+    box = _box_of(view, *handle_box_world)
+    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), load_spec(hand), PlannerConfig())
+    obs = Observation(rgb=None, depth=depth, instruction=instruction, camera_view=view)
+    result = PlanResult(stage_reached="locate", failed_stage=None, target_kind="drawer")
+    handle = estimate_handle(box, depth, view, planner.config)
+    shape = planner.perceive(handle, box, obs, result)
+    grasp = planner.choose_grasp(handle, shape, obs, result)
+    return handle, shape, grasp
+
+
+@pytest.mark.parametrize("hand", ["allegro", "shadow"])
+def test_thin_bar_close_to_the_panel_is_pinched(hand):
+    bar, posts = _bar(thickness=0.008, gap=0.008)
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar)
+    assert handle.kind == "bar" and handle.orientation == "horizontal"
+    assert shape.thickness == pytest.approx(0.008, abs=0.004)
+    assert shape.gap < 0.012
+    assert grasp.style == "pinch"
+
+
+@pytest.mark.parametrize("hand", ["allegro", "skeleton"])
+def test_wide_bar_with_room_behind_is_hooked(hand):
+    bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar)
+    assert handle.kind == "bar"
+    assert shape.thickness == pytest.approx(0.014, abs=0.005)
+    assert shape.gap == pytest.approx(0.03, abs=0.008)
+    assert shape.length == pytest.approx(0.25, abs=0.02)
+    assert grasp.style == "hook"
+    # the site goes to the bar (within a centimetre), approached along +x
+    assert np.allclose(grasp.pos[1:], [0.0, 0.0], atol=0.01)
+    assert grasp.axis[0] > 0.99
+
+
+def test_vertical_thin_bar_and_its_neighbour():
+    """A vertical bar with a second handle 6 cm to its side (double doors): the neighbour is seen."""
+    bar, posts = _bar(thickness=0.008, gap=0.02, length=0.2, y=0.03, orientation="vertical")
+    other, other_posts = _bar(thickness=0.008, gap=0.02, length=0.2, y=-0.038, orientation="vertical")
+    handle, shape, grasp = _choose("allegro", [bar, *posts, other, *other_posts], bar, "top left door")
+    assert handle.orientation == "vertical"
+    assert shape.clear["right"] == pytest.approx(0.06, abs=0.012)
+    assert shape.clear["left"] > 0.1
+    assert grasp.style == "hook"
+
+
+def test_knob_is_wrapped():
+    knob = ((PANEL_X - 0.035, -0.017, -0.017), (PANEL_X, 0.017, 0.017))
+    handle, shape, grasp = _choose("allegro", [knob], knob)
+    assert handle.kind == "knob"
+    assert shape.length == pytest.approx(0.034, abs=0.006)
+    assert grasp.style == "wrap"
+
+
+def test_parallel_gripper_pinches_every_bar():
+    bar, posts = _bar(thickness=0.008, gap=0.008)
+    _, _, grasp = _choose("franka", [bar, *posts], bar)
+    assert grasp.style == "hook"  # the gripper closes across the bar whatever the gap (pinch_gap 0)
