@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from opend_mj.sim.hands import HandSpec, grasp_pose_to_root_pose
+from opend_mj.sim.hands import HandSpec, grasp_pose_to_root_pose, touch_dict, touch_parts
 
 AGENT_CONTROLS = ("absolute", "delta")
 AGENT_IMAGES = ("first", "every_step")
@@ -111,6 +111,10 @@ class _ObservedRobot:
 
     def finger_qpos(self) -> np.ndarray:
         return self.obs["hand_qpos"]
+
+    def contact_touch(self) -> dict[str, float]:
+        """What the hand feels per part (the ``touch`` observation; `opend_mj.sim.hands.HandTouch`)."""
+        return touch_dict(touch_parts(self.spec), self.obs["touch"])
 
     def step(self, site_pos, site_quat, fingers) -> None:
         root_pos, root_quat = grasp_pose_to_root_pose(self.spec, site_pos, site_quat)

@@ -42,6 +42,7 @@ from opend_mj.policy.perception import (
 from opend_mj.sim.hands import (
     HANDS_DIR,
     HandSpec,
+    HandTouch,
     grasp_pose_to_root_pose,
     orientation_for_handle,
 )
@@ -237,28 +238,7 @@ class Robot:
         self._data = self.physics.data.ptr
         self._site_id = int(self.physics.bind(self.task.hand.grasp_site).element_id)
         self._finger_qpos = np.array([int(a) for a in self.physics.bind(self.task.hand.joints).qposadr])
-        # touch sensors (the hand's own state): sensordata address of each, and its part
-        model = self.task.hand.mjcf_model
-        self.touch_parts: list[str] = []
-        adrs = []
-        for name, part in self.spec.touch_sensors.items():
-            sensor = model.find("sensor", name)
-            if sensor is None:
-                continue
-            sid = int(self.physics.bind(sensor).element_id)
-            adrs.append(int(self.physics.model.sensor_adr[sid]))
-            self.touch_parts.append(part)
-        self._touch_adr = np.array(adrs, dtype=int)
-        # the geom under each touch site, and every geom of the hand (its own contacts are not touch)
-        m = self.physics.model.ptr
-        self._geom_part: dict[int, str] = {}
-        for name, part in self.spec.touch_sensors.items():
-            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
-            if geom is not None:
-                self._geom_part[int(self.physics.bind(geom).element_id)] = part
-        hand_bodies = {int(b) for b in self.physics.bind(model.find_all("body")).element_id}
-        self._hand_geom = np.isin(m.geom_bodyid, list(hand_bodies))
-        self._force6 = np.zeros(6)
+        self._touch = HandTouch(self.task.hand, self.physics)  # the hand's own state
 
     @property
     def control_dt(self) -> float:
@@ -279,31 +259,9 @@ class Robot:
     def finger_qpos(self) -> np.ndarray:
         return self._data.qpos[self._finger_qpos]
 
-    def touch(self) -> dict[str, float]:
-        """Normal force (N) on each part of the hand (palm, thumb, each finger), from its touch sensors."""
-        out: dict[str, float] = {}
-        values = self._data.sensordata[self._touch_adr] if len(self._touch_adr) else []
-        for part, v in zip(self.touch_parts, values):
-            out[part] = out.get(part, 0.0) + float(v)
-        return out
-
     def contact_touch(self) -> dict[str, float]:
-        """Normal force (N) on each part of the hand from things that are not the hand: what its
-        touch sensors feel, less the hand's own contacts (a thumb pressing on a finger)."""
-        import mujoco
-
-        d, m = self._data, self.physics.model.ptr
-        out: dict[str, float] = {}
-        for i in range(d.ncon):
-            c = d.contact[i]
-            g1, g2 = int(c.geom1), int(c.geom2)
-            h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
-            if h1 == h2:
-                continue
-            part = self._geom_part.get(g1 if h1 else g2, "other")  # a geom without a touch site
-            mujoco.mj_contactForce(m, d, i, self._force6)
-            out[part] = out.get(part, 0.0) + abs(float(self._force6[0]))
-        return out
+        """Normal force (N) on each part of the hand from things that are not the hand (`HandTouch`)."""
+        return self._touch.read()
 
     def step(self, site_pos, site_quat, fingers) -> None:
         """One control step toward a grasp-site target pose (converted to the root target)."""

@@ -43,7 +43,7 @@ from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
 from opend_mj.language import describe_instruction  # noqa: E402
-from opend_mj.sim.hands import get_hand, load_spec  # noqa: E402
+from opend_mj.sim.hands import HandTouch, get_hand, load_spec, touch_parts  # noqa: E402
 from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, RewardProbe, dense_reward, sparse_reward  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
 from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
@@ -61,7 +61,7 @@ INSTRUCTION_DIM = len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + len(KIND_LABEL
 
 #: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state).
 PROPRIO_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", "grasp_site_pos",
-                "grasp_site_quat", "mocap_pos", "mocap_quat", "time")
+                "grasp_site_quat", "mocap_pos", "mocap_quat", "touch", "time")
 CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
 #: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
 PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
@@ -236,6 +236,7 @@ class SceneReader:
         self._free_dof = int(physics.bind(task.mocap.freejoint).dofadr)
         self._mocap = task.mocap.mocap_id(physics)
         self.probe = RewardProbe(task, physics)
+        self._touch = HandTouch(task.hand, physics)
         self._camera = None
 
     def proprio(self) -> dict:
@@ -250,6 +251,7 @@ class SceneReader:
             "grasp_site_quat": mat_to_quat(d.site_xmat[self._site].reshape(3, 3)),
             "mocap_pos": d.mocap_pos[self._mocap].copy(),
             "mocap_quat": d.mocap_quat[self._mocap].copy(),
+            "touch": self._touch.vector(),
             "time": np.array([float(d.time)]),
         }
 
@@ -474,7 +476,7 @@ class OpenDCore:
         layout = {"hand_qpos": ((n,), "float"), "hand_qvel": ((n,), "float"), "root_pos": ((3,), "float"),
                   "root_quat": ((4,), "float"), "root_vel": ((6,), "float"), "grasp_site_pos": ((3,), "float"),
                   "grasp_site_quat": ((4,), "float"), "mocap_pos": ((3,), "float"), "mocap_quat": ((4,), "float"),
-                  "time": ((1,), "float")}
+                  "touch": ((len(touch_parts(self.spec)),), "float"), "time": ((1,), "float")}
         layout["instruction"] = ((), "text") if self.config.instruction == "text" else ((INSTRUCTION_DIM,), "float")
         if self.config.obs_mode == "rgbd":
             layout.update({"rgb": ((size, size, 3), "uint8"), "depth": ((size, size), "float"),

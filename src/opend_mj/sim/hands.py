@@ -354,6 +354,59 @@ class MocapHandle:
         return s.xpos.copy(), mat_to_quat(s.xmat.reshape(3, 3))
 
 
+def touch_parts(spec: HandSpec) -> tuple[str, ...]:
+    """The parts a hand feels touch on (palm, thumb, each finger; sorted), then ``other`` (a hand
+    geom without a touch site): the order of `HandTouch.vector` and of the ``touch`` observation."""
+    return tuple(sorted(set(spec.touch_sensors.values()))) + ("other",)
+
+
+class HandTouch:
+    """What the hand feels: the normal force (N) on each of its parts from things that are not the
+    hand (a thumb pressing on a finger is not touch). Part of the hand's own state, as its touch
+    sensors would report it with self-contact filtered out."""
+
+    def __init__(self, hand: Hand, physics):
+        import mujoco
+
+        self._mj_contact_force = mujoco.mj_contactForce
+        model = hand.mjcf_model
+        self.parts = touch_parts(hand.spec)
+        self._index = {p: i for i, p in enumerate(self.parts)}
+        self._m, self._d = physics.model.ptr, physics.data.ptr
+        self._geom_part: dict[int, int] = {}
+        for name, part in hand.spec.touch_sensors.items():
+            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
+            if geom is not None:
+                self._geom_part[int(physics.bind(geom).element_id)] = self._index[part]
+        hand_bodies = {int(b) for b in physics.bind(model.find_all("body")).element_id}
+        self._hand_geom = np.isin(self._m.geom_bodyid, list(hand_bodies))
+        self._force6 = np.zeros(6)
+
+    def vector(self) -> np.ndarray:
+        """Force per part, in `parts` order (0: the part touches nothing)."""
+        m, d = self._m, self._d
+        force = np.zeros(len(self.parts))
+        other = len(self.parts) - 1
+        for i in range(d.ncon):
+            c = d.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
+            if h1 == h2:
+                continue
+            self._mj_contact_force(m, d, i, self._force6)
+            force[self._geom_part.get(g1 if h1 else g2, other)] += abs(float(self._force6[0]))
+        return force
+
+    def read(self) -> dict[str, float]:
+        """Force per part that feels any, by part name (what the planner and agents read)."""
+        return touch_dict(self.parts, self.vector())
+
+
+def touch_dict(parts, forces) -> dict[str, float]:
+    """``{part: force}`` of the parts that feel a force (the ``touch`` observation as a dict)."""
+    return {p: float(f) for p, f in zip(parts, forces) if f > 0.0}
+
+
 def attach_with_mocap(arena_mjcf, hand: Hand, *, solref=WELD_SOLREF, solimp=WELD_SOLIMP,
                       mocap_name: str = "hand_mocap") -> MocapHandle:
     """Attach ``hand`` to ``arena_mjcf`` (an mjcf RootElement or a composer Arena) as a free entity
