@@ -31,7 +31,7 @@ from opend_mj.meshes import DecompositionStats, Hull, collision_hulls, mass_prop
 from opend_mj.sources import CARCASS, CabinetSource, Part, SourceError, read_source, source_hash
 
 #: Bump when the compiler's output changes for the same input and config (invalidates the cache).
-COMPILER_VERSION = 2
+COMPILER_VERSION = 3
 CABINET_XML = "cabinet.xml"
 CABINET_JSON = "cabinet.json"
 
@@ -138,6 +138,7 @@ class _MjcfWriter:
         self.config = config
         self.cache_dir = cache_dir
         self.stats = DecompositionStats()
+        self._memo: dict = {}  # decompositions of this cabinet by piece shape (copies of one part)
         self.counts = {"hulls": 0, "boxes": 0, "mesh_hulls": 0, "visual_meshes": 0, "textures": 0}
         self.root = ET.Element("mujoco", model=f"cabinet_{source.id}")
         ET.SubElement(self.root, "compiler", angle="radian")
@@ -186,7 +187,7 @@ class _MjcfWriter:
         c = self.config
         origin = self._origin(part)
         body_hulls = self._hulls([v for v in part.visuals if not v.is_handle], origin)
-        handle_hulls = self._hulls(part.handles, origin)
+        handle_hulls = self._hulls(part.handles, origin, handle=True)
         all_hulls = body_hulls + handle_hulls
         mass, com, inertia = mass_properties(all_hulls, c.density)
         if part.joint is not None:
@@ -214,15 +215,18 @@ class _MjcfWriter:
         if names:
             self.handle_geoms[part.name] = names
 
-    def _hulls(self, visuals, origin: np.ndarray) -> list[Hull]:
+    def _hulls(self, visuals, origin: np.ndarray, handle: bool = False) -> list[Hull]:
         if not visuals:
             return []
-        verts, faces, offset = [], [], 0
+        verts, faces, groups, offset = [], [], [], 0
+        files = {}
         for v in visuals:
             verts.append(v.vertices - origin)
             faces.append(v.faces + offset)
+            groups.append(np.full(len(v.faces), files.setdefault(v.file, len(files))))
             offset += len(v.vertices)
-        return collision_hulls(np.vstack(verts), np.vstack(faces), self.config, self.cache_dir, self.stats)
+        return collision_hulls(np.vstack(verts), np.vstack(faces), self.config, self.cache_dir, self.stats,
+                               groups=np.concatenate(groups), handle=handle, memo=self._memo)
 
     def _geom(self, body: ET.Element, hull: Hull, name: str, cls: str) -> None:
         p = self.config.precision
@@ -406,6 +410,10 @@ def compile_cabinet(
             "decomposed_pieces": writer.stats.decomposed_pieces,
             "coacd_hulls": writer.stats.coacd_hulls,
             "dropped_pieces": writer.stats.dropped_pieces,
+            "split_hulls": writer.stats.split_hulls,
+            "split_cache_hits": writer.stats.cache_hits,
+            "split_seconds": round(writer.stats.split_seconds, 3),
+            "max_split_deviation": round(writer.stats.max_deviation, 5),
             "seconds": round(time.perf_counter() - start, 3),
         },
     }
