@@ -48,6 +48,17 @@ class CompileResult:
     info: dict = field(default_factory=dict)  # the cabinet.json content when built or cached
 
 
+def default_cache_dir() -> Path:
+    """Where decompositions are cached across output folders: $OPEND_CACHE_DIR, else
+    $XDG_CACHE_HOME/opend-mj, else ~/.cache/opend-mj."""
+    import os
+
+    if os.environ.get("OPEND_CACHE_DIR"):
+        return Path(os.environ["OPEND_CACHE_DIR"]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base).expanduser() / "opend-mj"
+
+
 def _fmt(values, precision: int = 6) -> str:
     return " ".join(f"{float(v):.{precision}g}" if abs(float(v)) >= 1e-12 else "0" for v in np.ravel(values))
 
@@ -339,6 +350,7 @@ def compile_cabinet(
     def rejected(reason: str, message: str) -> CompileResult:
         if out_dir.exists():
             shutil.rmtree(out_dir, ignore_errors=True)
+        message = " ".join(str(message).split())  # one line, whatever the underlying error printed
         return CompileResult(cabinet_id, "rejected", reason, message, time.perf_counter() - start)
 
     try:
@@ -356,7 +368,7 @@ def compile_cabinet(
             pass
 
     try:
-        source = read_source(source_dir, config.scale)
+        source = read_source(source_dir, config.scale, config.max_mesh_faces)
     except SourceError as exc:
         return rejected(exc.kind, str(exc))
     records = _target_records(source)
@@ -370,7 +382,7 @@ def compile_cabinet(
     if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
-    writer = _MjcfWriter(source, out_dir, config, cache_dir or (Path(out_root) / ".cache"))
+    writer = _MjcfWriter(source, out_dir, config, cache_dir or default_cache_dir())
     try:
         root = writer.write()
     except Exception as exc:  # decomposition on a broken mesh, qhull failures

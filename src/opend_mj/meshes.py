@@ -47,13 +47,23 @@ class Hull:
         return float(_hull(self.vertices).volume)
 
 
-def load_mesh_file(path: Path) -> list[tuple[trimesh.Trimesh, object]]:
+def load_mesh_file(path: Path, max_faces: int | None = None) -> list[tuple[trimesh.Trimesh, object]]:
     """Load an OBJ (or any trimesh format) as (mesh, visual) parts, one per material.
 
-    Raises MeshError for missing, empty, NaN or degenerate meshes.
+    Raises MeshError for missing, empty, NaN or degenerate meshes, and for OBJ files with more than
+    `max_faces` faces (counted before parsing, so a huge file cannot stall a worker).
     """
     if not path.is_file():
         raise MeshError(f"{path}: mesh file is missing")
+    if max_faces is not None and path.suffix.lower() == ".obj":
+        count = 0
+        with open(path, "rb") as fh:
+            for line in fh:
+                if line.startswith(b"f "):
+                    count += max(1, len(line.split()) - 3)
+        if count > max_faces:
+            raise MeshError(f"{path}: mesh has {count} faces, more than the limit of {max_faces} "
+                            f"(CompilerConfig.max_mesh_faces)")
     try:
         loaded = trimesh.load(path, process=False)
     except Exception as exc:  # trimesh raises many exception types for bad files
@@ -626,6 +636,12 @@ def collision_hulls(
         for pv, pf in pieces(wv, wf):
             if float(np.linalg.norm(np.ptp(pv, axis=0))) < config.min_piece_size:
                 stats.dropped_pieces += 1
+                continue
+            if len(pv) < 4:  # a lone triangle: one thickened plate
+                hull = to_hull(pv, hull_config)
+                if hull is not None:
+                    hulls.append(hull)
+                    stats.convex_pieces += 1
                 continue
             stats.decomposed_pieces += 1
             for points in cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill,
