@@ -65,8 +65,9 @@ class CompilerConfig:
     #: Largest distance (m) of a split hull from the visual surface: handles, everything else.
     handle_tolerance: float = 0.001
     surface_tolerance: float = 0.002
-    #: Flat handle pieces are thickened to this (m), so that their hulls stay within handle_tolerance.
-    handle_min_thickness: float = 0.002
+    #: Flat handle pieces are thickened to this (m). 0.002 would keep them within handle_tolerance of
+    #: their plane; it stays at min_thickness so that procedural cabinets (flat knob faces) compile as before.
+    handle_min_thickness: float = 0.004
     #: Hull budget per non-convex piece (a piece that needs more keeps its last, larger hulls).
     handle_max_hulls: int = 16
     max_hulls_per_piece: int = 6

@@ -637,7 +637,9 @@ def collision_hulls(
             if float(np.linalg.norm(np.ptp(pv, axis=0))) < config.min_piece_size:
                 stats.dropped_pieces += 1
                 continue
-            if len(pv) < 4:  # a lone triangle: one thickened plate
+            flat = len(pv) < 4 or 2 * float(np.min(oriented_box(pv)[2])) < config.min_thickness
+            if len(pv) < 4 or (flat and _covered(pv, pf, _hull(pv), tolerance / 4)):
+                # a lone triangle or a convex flat plate: one thickened plate, as it is
                 hull = to_hull(pv, hull_config)
                 if hull is not None:
                     hulls.append(hull)
