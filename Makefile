@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate install system-deps assets test bench bench-quick bench-assets bench-hands bench-task clean
+.PHONY: quickstart evaluate install system-deps assets test bench bench-quick bench-assets bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -64,3 +64,7 @@ clean:
 
 bench-task: install
 	$(BIN)/python tools/bench_task.py
+
+## gymnasium environment steps/s: state-only and RGB-D, 1 process and a 2-process vector env (also in `make bench`).
+bench-env: install
+	$(BIN)/python tools/bench_env.py --cabinets $(CABINETS)

@@ -34,7 +34,7 @@ class Compiled:
         return self.dir / "cabinet.xml"
 
     def model(self):
-        from opend_mj.checks import load_cabinet
+        from opend_mj.assets.checks import load_cabinet
 
         return load_cabinet(self.dir)
 
@@ -53,7 +53,7 @@ def real_source() -> Path:
 
 @pytest.fixture(scope="session")
 def real_cabinet(real_source, tmp_path_factory, compile_cache) -> Compiled:
-    from opend_mj.compiler import compile_cabinet
+    from opend_mj.assets.compiler import compile_cabinet
 
     out = tmp_path_factory.mktemp("real_cabinets")
     result = compile_cabinet(real_source, out, cache_dir=compile_cache)
@@ -63,7 +63,7 @@ def real_cabinet(real_source, tmp_path_factory, compile_cache) -> Compiled:
 
 @pytest.fixture(scope="session")
 def proc_sources(tmp_path_factory) -> list[Path]:
-    from opend_mj.procedural import generate_sources
+    from opend_mj.assets.procedural import generate_sources
 
     return generate_sources(N_PROC_SOURCES, 0, tmp_path_factory.mktemp("proc_sources"), progress=False)
 
@@ -71,7 +71,7 @@ def proc_sources(tmp_path_factory) -> list[Path]:
 @pytest.fixture(scope="session")
 def proc_cabinets(proc_sources, tmp_path_factory, compile_cache) -> list[Compiled]:
     """The first few procedural sources that compile, covering drawers and double doors."""
-    from opend_mj.compiler import compile_cabinet
+    from opend_mj.assets.compiler import compile_cabinet
 
     out = tmp_path_factory.mktemp("proc_cabinets")
     chosen: list[Compiled] = []
@@ -96,3 +96,13 @@ def any_cabinet(request) -> Compiled:
     if request.param == "real":
         return request.getfixturevalue("real_cabinet")
     return request.getfixturevalue("proc_cabinets")[int(request.param[4:])]
+
+
+@pytest.fixture(scope="session")
+def small_dataset(proc_sources, tmp_path_factory) -> Path:
+    """A compiled dataset (manifest + cabinets) of the first dozen procedural sources."""
+    from opend_mj.assets.dataset import build_dataset
+
+    out = tmp_path_factory.mktemp("small_dataset")
+    build_dataset(proc_sources[:12], out, workers=2, progress=False, log=lambda *a: None)
+    return out

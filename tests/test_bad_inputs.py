@@ -10,9 +10,9 @@ from typing import Callable
 
 import pytest
 
-from opend_mj.compiler import compile_cabinet
-from opend_mj.dataset import build_dataset
-from opend_mj.procedural import generate_source
+from opend_mj.assets.compiler import compile_cabinet
+from opend_mj.assets.dataset import build_dataset
+from opend_mj.assets.procedural import generate_source
 
 #: proc_0013 of seed 0 is a single door (revolute joint), proc_0001 a single drawer; both describable.
 DOOR_INDEX, DRAWER_INDEX = 13, 1
@@ -227,14 +227,14 @@ SAFETY_CASES = {
 def test_unsafe_or_huge_source_is_rejected_in_one_line(name, good_sources, tmp_path, monkeypatch):
     import dataclasses
 
-    from opend_mj.config import CompilerConfig
+    from opend_mj.assets.config import CompilerConfig
 
     src = Path(shutil.copytree(good_sources[0], tmp_path / "src" / name))
     broken_file = SAFETY_CASES[name][0](src)
     _, reason, problem = SAFETY_CASES[name]
     opened = []
     if name.startswith("mesh_path"):
-        import opend_mj.sources as sources
+        from opend_mj.assets import sources
 
         real = sources.load_mesh_file
         monkeypatch.setattr(sources, "load_mesh_file", lambda p, *a: opened.append(p) or real(p, *a))

@@ -7,7 +7,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
-from opend_mj.camera import (  # noqa: E402
+from opend_mj.sim.camera import (  # noqa: E402
     CameraIntrinsics,
     RGBDCamera,
     box_corners,
@@ -16,7 +16,7 @@ from opend_mj.camera import (  # noqa: E402
     geom_box_corners,
     place_camera,
 )
-from opend_mj.rooms import RoomArena  # noqa: E402
+from opend_mj.sim.rooms import RoomArena  # noqa: E402
 
 HX, HY, H = 0.25, 0.45, 1.2
 MARK = np.array([-0.45, 0.2, 0.9])  # a small bright sphere in front of the box
@@ -56,7 +56,7 @@ def test_pose_looks_along_plus_x_and_image_left_is_plus_y():
 
 
 def camera_view_from_pose(pose, w=256, h=256):
-    from opend_mj.camera import CameraView
+    from opend_mj.sim.camera import CameraView
 
     return CameraView(CameraIntrinsics.from_fovy(pose.fovy, w, h), pose.pos, pose.rot)
 
@@ -137,7 +137,7 @@ def test_shared_context_renderer_gives_mujocos_images(physics):
     """Renderers share one GL context per process; the images are mujoco.Renderer's, to the bit."""
     import mujoco
 
-    from opend_mj.camera import RGBDCamera
+    from opend_mj.sim.camera import RGBDCamera
 
     model, data = physics.model.ptr, physics.data.ptr
     for _ in range(2):  # a second renderer on the same (kept) context

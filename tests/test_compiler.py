@@ -12,9 +12,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from opend_mj.checks import drive_through_range, gravity_drift, movable_joints, rest_contacts
-from opend_mj.compiler import compile_cabinet
-from opend_mj.config import CompilerConfig
+from opend_mj.assets.checks import drive_through_range, gravity_drift, movable_joints, rest_contacts
+from opend_mj.assets.compiler import compile_cabinet
+from opend_mj.assets.config import CompilerConfig
 
 CONFIG = CompilerConfig()
 

@@ -10,16 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from opend_mj.cli import main
-from opend_mj.config import DatasetConfig
-from opend_mj.dataset import (
-    MANIFEST,
-    assign_split,
-    build_dataset,
-    format_split_table,
-    list_sources,
-    load_manifest,
-    split_table,
-)
+from opend_mj.assets.config import DatasetConfig
+from opend_mj.assets.dataset import assign_split, build_dataset, format_split_table, list_sources
+from opend_mj.assets.layout import MANIFEST, load_manifest, split_table
 
 N = 12
 

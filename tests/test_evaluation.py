@@ -7,13 +7,15 @@ from pathlib import Path
 
 import pytest
 
-from opend_mj.evaluation import EpisodeJob, ResultsWriter, episode_key, load_results, run_jobs
+from opend_mj.evaluation.episode import episode_key, EpisodeJob
+from opend_mj.evaluation.pool import run_jobs
+from opend_mj.evaluation.results import load_results, ResultsWriter
 
 
 @pytest.fixture(scope="module")
 def drawer_cabinet(tmp_path_factory) -> Path:
-    from opend_mj.compiler import compile_cabinet
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("eval_cabinets")
     src = generate_source(4, 0, root / "src")  # proc_0004: a drawer stack
@@ -79,7 +81,9 @@ def test_errors_are_recorded_and_the_pool_goes_on(tmp_path, drawer_cabinet):
 
 def test_episodes_sharing_a_scene_give_the_records_of_separate_scenes(drawer_cabinet):
     """`opend run` builds one scene per cabinet and hand; each episode's record must not change."""
-    from opend_mj.evaluation import group_jobs, run_episode, run_episode_group, strip_wall_clock
+    from opend_mj.evaluation.episode import strip_wall_clock
+    from opend_mj.evaluation.jobs import group_jobs
+    from opend_mj.evaluation.runner import run_episode, run_episode_group
 
     joints = [t["joint"] for t in json.loads((drawer_cabinet / "cabinet.json").read_text())["targets"]][:2]
     jobs = _jobs(drawer_cabinet, joints)
@@ -93,7 +97,7 @@ def test_episodes_sharing_a_scene_give_the_records_of_separate_scenes(drawer_cab
 
 def test_a_coarser_physics_timestep_is_recorded_and_keyed_apart(drawer_cabinet, tmp_path):
     """`--physics-timestep 1/120`: the episode runs (4x fewer substeps), says so, and resumes apart."""
-    from opend_mj.evaluation import run_episode
+    from opend_mj.evaluation.runner import run_episode
 
     joint = json.loads((drawer_cabinet / "cabinet.json").read_text())["targets"][0]["joint"]
     default, coarse = _jobs(drawer_cabinet, [joint]) + _jobs(drawer_cabinet, [joint], physics_timestep=1 / 120)

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from dm_control import mjcf
 
-from opend_mj import hands
+from opend_mj import transforms
+from opend_mj.sim import hand_scene, hands
 
 EXPECTED_DOF = {"franka": 2, "allegro": 16, "shadow": 20, "skeleton": 20}
 
@@ -40,7 +41,7 @@ def test_dof_and_structure(name):
 
 
 def _air_scene(name):
-    root, handle = hands.build_scene(name, pos=(0, 0, 0.5))
+    root, handle = hand_scene.build_scene(name, pos=(0, 0, 0.5))
     physics = mjcf.Physics.from_mjcf_model(root)
     return physics, handle
 
@@ -94,8 +95,8 @@ def test_still_in_air(name):
 @pytest.mark.parametrize("name", sorted(EXPECTED_DOF))
 def test_grasp_and_pull_bar(name, orientation):
     """Approach, close with the grasp profile, pull: the damped, frictional bar follows >= 10 cm."""
-    bar = hands.BarConfig(damping=40.0, frictionloss=8.0, radius=0.0065)
-    r = hands.bar_pull_trial(name, orientation, bar=bar, pull_distance=0.15)
+    bar = hand_scene.BarConfig(damping=40.0, frictionloss=8.0, radius=0.0065)
+    r = hand_scene.bar_pull_trial(name, orientation, bar=bar, pull_distance=0.15)
     assert r.bar_moved > 0.12, r  # at least 10 cm with margin
     assert r.slip < 0.01, r
 
@@ -104,7 +105,7 @@ def test_grasp_pose_roundtrip():
     spec = hands.load_spec("allegro")
     for o in ("horizontal", "vertical"):
         q = hands.orientation_for_handle(o)
-        rmat = hands.quat_to_mat(q)
+        rmat = transforms.quat_to_mat(q)
         assert np.allclose(rmat[:, 2], [1, 0, 0])  # approach +x
         axis = [0, 1, 0] if o == "horizontal" else [0, 0, -1]
         assert np.allclose(rmat[:, 0], axis)
@@ -115,7 +116,7 @@ def test_grasp_pose_roundtrip():
 
 
 def test_mocap_attachment_names_and_site_placement():
-    root, handle = hands.build_scene("shadow")
+    root, handle = hand_scene.build_scene("shadow")
     physics = mjcf.Physics.from_mjcf_model(root)
     q = hands.orientation_for_handle("vertical")
     site = np.array([0.3, -0.1, 0.8])

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from opend_mj.config import LanguageConfig
-from opend_mj.language import Description, LanguageInvalid, TargetLayout, describe, paraphrase
+from opend_mj.language import PARAPHRASES, Description, LanguageConfig, LanguageInvalid, TargetLayout, describe, paraphrase
 
 
 def stack(n: int, kind: str = "drawer", y: float = 0.0, z0: float = 0.1, dz: float = 0.15) -> list[TargetLayout]:
@@ -165,9 +164,35 @@ def test_paraphrases_read_back_to_the_same_target(template, labels):
 
 
 def test_paraphrased_episodes_are_their_own_episodes():
-    from opend_mj.evaluation import EpisodeJob, _base
+    from opend_mj.evaluation.episode import EpisodeJob, record_fields
 
     job = EpisodeJob(cabinet="c", cabinet_dir="x", joint="joint_0", split="test", hand="allegro", solver="oracle")
     reworded = EpisodeJob(**{**job.__dict__, "paraphrase": 2})
     assert job.key() != reworded.key()
-    assert "paraphrase" not in _base(job) and _base(reworded)["paraphrase"] == 2
+    assert "paraphrase" not in record_fields(job) and record_fields(reworded)["paraphrase"] == 2
+
+
+def test_describe_instruction_reads_labels():
+    from dataclasses import astuple
+
+    from opend_mj.language import describe_instruction
+
+    def parse_instruction(text):
+        return astuple(describe_instruction(text))
+
+    assert parse_instruction("second top left drawer") == ("second top", "left", "drawer")
+    assert parse_instruction("bottom door") == ("bottom", "", "door")
+    assert parse_instruction("right door") == ("", "right", "door")
+    assert parse_instruction("middle drawer") == ("middle", "", "drawer")
+    assert parse_instruction("top middle door") == ("top", "middle", "door")
+    assert parse_instruction("open the drawer at the top on the second right") == ("top", "second right", "drawer")
+
+
+@pytest.mark.parametrize("template", range(len(PARAPHRASES)))
+def test_canonical_instruction_undoes_every_paraphrase(template):
+    from opend_mj.language import canonical_instruction
+
+    for labels in [("top", "left", "drawer"), ("second bottom", "", "door"), ("", "second right", "door"),
+                   ("middle", "middle", "drawer"), ("", "", "drawer")]:
+        d = Description(*labels)
+        assert canonical_instruction(paraphrase(d, template)) == d.instruction

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opend_mj.learned.detector import match_instruction, parse_instruction
+from opend_mj.policy.learned.detector import match_instruction
 
 # --------------------------------------------------------------------------------------------------
 # Matching detections to instructions (Algorithm 1 on box centres): no torch, no rendering
@@ -14,15 +14,6 @@ from opend_mj.learned.detector import match_instruction, parse_instruction
 
 def _box(u, v, w=20, h=4):
     return [u - w / 2, v - h / 2, u + w / 2, v + h / 2]
-
-
-def test_parse_instruction():
-    assert parse_instruction("second top left drawer") == ("second top", "left", "drawer")
-    assert parse_instruction("bottom door") == ("bottom", "", "door")
-    assert parse_instruction("right door") == ("", "right", "door")
-    assert parse_instruction("middle drawer") == ("middle", "", "drawer")
-    assert parse_instruction("top middle door") == ("top", "middle", "door")
-    assert parse_instruction("open the drawer at the top on the second right") == ("top", "second right", "drawer")
 
 
 def test_three_stacked_drawers():
@@ -56,7 +47,7 @@ def test_missing_detection_falls_back_to_nearest_rank():
 
 
 def test_metric_matching_with_depth_and_camera():
-    from opend_mj.camera import CameraIntrinsics, CameraView
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
 
     # camera at x = -2 looking along +x (right = -y, up = +z, backward = -x)
     rot = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -72,14 +63,14 @@ def test_metric_matching_with_depth_and_camera():
 
 
 def test_mirror_instruction():
-    from opend_mj.learned.train import mirror_instruction
+    from opend_mj.policy.learned.train import mirror_instruction
 
     assert mirror_instruction("second top left door") == "second top right door"
     assert mirror_instruction("top middle drawer") == "top middle drawer"
 
 
 def test_map_to_box_centre_and_orientation():
-    from opend_mj.learned.affordance import map_to_box
+    from opend_mj.policy.learned.affordance import map_to_box
 
     prob = np.zeros((64, 64))
     prob[30:33, 10:40] = 0.9  # horizontal bar
@@ -102,9 +93,9 @@ torch = pytest.importorskip("torch")
 
 @pytest.fixture(scope="module")
 def tiny_data(tmp_path_factory):
-    from opend_mj.compiler import compile_cabinet
-    from opend_mj.learned.data import DataConfig, make_dataset
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.policy.learned.data import DataConfig, make_dataset
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("learned")
     src = generate_source(0, 0, root / "sources")  # proc_0000 of the default dataset: four doors
@@ -118,7 +109,7 @@ def tiny_data(tmp_path_factory):
 
 
 def test_data_format(tiny_data):
-    from opend_mj.learned.data import load_images, load_records
+    from opend_mj.policy.learned.data import load_images, load_records
 
     out, info = tiny_data
     assert info["images"] == 8 and info["format_version"] == 1
@@ -143,9 +134,9 @@ def test_data_format(tiny_data):
 
 
 def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
-    from opend_mj.learned.affordance import AffordanceConfig, CLIPortSolver
-    from opend_mj.learned.data import camera_view_of, load_images, load_records
-    from opend_mj.learned.train import train_cliport
+    from opend_mj.policy.learned.affordance import AffordanceConfig, CLIPortSolver
+    from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
+    from opend_mj.policy.learned.train import train_cliport
 
     out, _ = tiny_data
     torch.manual_seed(0)
@@ -168,8 +159,8 @@ def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
 
 
 def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
-    from opend_mj.learned.data import camera_view_of, load_images, load_records
-    from opend_mj.learned.detector import DetectorConfig, FasterRCNNSolver, build_detector, detector_targets
+    from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
+    from opend_mj.policy.learned.detector import DetectorConfig, FasterRCNNSolver, build_detector, detector_targets
 
     out, _ = tiny_data
     torch.manual_seed(0)
@@ -204,13 +195,13 @@ def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
 
 
 def test_solvers_registered():
-    from opend_mj.solvers import list_solvers
+    from opend_mj.policy.solvers import list_solvers
 
     assert {"fasterrcnn", "cliport"} <= set(list_solvers())
 
 
 def test_text_encoders():
-    from opend_mj.learned.text import BagOfWordsEncoder, CachedEncoder
+    from opend_mj.policy.learned.text import BagOfWordsEncoder, CachedEncoder
 
     e = BagOfWordsEncoder().encode(["second top left drawer", "top left drawer"])
     assert e.shape == (2, BagOfWordsEncoder.dim) and not np.allclose(e[0], e[1])
@@ -223,8 +214,8 @@ def test_text_encoders():
 def test_pretrained_weights_load_from_a_local_file(tmp_path):
     import torchvision
 
-    from opend_mj.learned.affordance import AffordanceConfig, build_model
-    from opend_mj.learned.train import load_pretrained
+    from opend_mj.policy.learned.affordance import AffordanceConfig, build_model
+    from opend_mj.policy.learned.train import load_pretrained
 
     path = tmp_path / "resnet18.pth"
     ref = torchvision.models.resnet18(weights=None)

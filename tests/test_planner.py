@@ -14,8 +14,8 @@ DOOR = ("proc_0006", 6, "joint_0")
 
 @pytest.fixture(scope="session")
 def planner_cabinets(tmp_path_factory) -> dict[str, Path]:
-    from opend_mj.compiler import compile_cabinet
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("planner_cabinets")
     out = {}
@@ -28,7 +28,7 @@ def planner_cabinets(tmp_path_factory) -> dict[str, Path]:
 
 
 def _job(cabinets, which, hand, **kw):
-    from opend_mj.evaluation import EpisodeJob
+    from opend_mj.evaluation.episode import EpisodeJob
 
     cid, _, joint = which
     return EpisodeJob(cabinet=cid, cabinet_dir=str(cabinets[cid]), joint=joint, split="test", hand=hand,
@@ -39,7 +39,7 @@ def _job(cabinets, which, hand, **kw):
 @pytest.mark.parametrize("hand", ["allegro", "franka"])
 @pytest.mark.parametrize("which", [DRAWER, DOOR], ids=["drawer", "door"])
 def test_oracle_opens(planner_cabinets, hand, which):
-    from opend_mj.evaluation import run_episode
+    from opend_mj.evaluation.runner import run_episode
 
     rec = run_episode(_job(planner_cabinets, which, hand))
     assert "error" not in rec, rec.get("error")
@@ -52,9 +52,10 @@ def test_oracle_opens(planner_cabinets, hand, which):
 
 def test_estimate_handle_from_box_and_depth():
     """A synthetic depth image: a bar 4 cm in front of a wall is located within a few millimetres."""
-    from opend_mj.camera import CameraIntrinsics, CameraView
-    from opend_mj.planner import PlannerConfig, estimate_handle
-    from opend_mj.solvers import HandleBox
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+    from opend_mj.policy.perception import estimate_handle
+    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.handle import HandleBox
 
     # camera at the origin looking along +x (columns: right = -y, up = +z, backward = -x)
     rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
@@ -72,7 +73,7 @@ def test_estimate_handle_from_box_and_depth():
 
 
 def test_solver_registry():
-    from opend_mj.solvers import get_solver, list_solvers, needs_ground_truth, register_solver
+    from opend_mj.policy.solvers import get_solver, list_solvers, needs_ground_truth, register_solver
 
     assert "oracle" in list_solvers() and needs_ground_truth("oracle")
     solver = get_solver("oracle", ground_truth=lambda: (1, 2, 30, 12))
@@ -94,7 +95,7 @@ def test_solver_registry():
 
 
 def test_target_kind_from_instruction():
-    from opend_mj.planner import target_kind_from_instruction
+    from opend_mj.language import target_kind as target_kind_from_instruction
 
     assert target_kind_from_instruction("second top left door") == "door"
     assert target_kind_from_instruction("drawer") == "drawer"
@@ -107,8 +108,8 @@ def test_target_kind_from_instruction():
 ])
 def test_infer_hinge_side_from_depth(handle_y, panel, expected):
     """A synthetic door plane: the hinge is on the side where the plane reaches farther."""
-    from opend_mj.camera import CameraIntrinsics, CameraView
-    from opend_mj.planner import HandleEstimate, infer_hinge_side
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+    from opend_mj.policy.perception import HandleEstimate, infer_hinge_side
 
     rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
     view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
@@ -122,7 +123,7 @@ def test_infer_hinge_side_from_depth(handle_y, panel, expected):
 
 
 def test_hinge_side_from_instruction():
-    from opend_mj.planner import hinge_side_from_instruction
+    from opend_mj.language import hinge_side as hinge_side_from_instruction
 
     assert hinge_side_from_instruction("top right door") == "right"
     assert hinge_side_from_instruction("left door") == "left"
@@ -132,9 +133,9 @@ def test_hinge_side_from_instruction():
 
 def test_refine_box_snaps_to_the_handle_in_depth():
     """A box that misses a handle by a few pixels is moved onto the part that stands out of the panel."""
-    from opend_mj.camera import CameraIntrinsics, CameraView
-    from opend_mj.planner import refine_box_with_depth
-    from opend_mj.solvers import HandleBox
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+    from opend_mj.policy.perception import refine_box_with_depth
+    from opend_mj.policy.handle import HandleBox
 
     rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
     view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)

@@ -16,7 +16,7 @@ import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from opend_mj.procedural import (
+from opend_mj.assets.procedural import (
     PARTNET_SCALE,
     Box,
     Cylinder,

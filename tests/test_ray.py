@@ -14,7 +14,8 @@ import pytest
 from click.testing import CliRunner
 
 from opend_mj.cli import main
-from opend_mj.evaluation import episode_key, make_jobs, strip_wall_clock
+from opend_mj.evaluation.episode import episode_key, strip_wall_clock
+from opend_mj.evaluation.jobs import make_jobs
 
 HAND = "franka"
 
@@ -34,7 +35,7 @@ def ray_instance():
 
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory) -> list[Path]:
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("ray_sources")
     return [generate_source(i, 0, root) for i in (1, 4, 5)]
@@ -42,7 +43,7 @@ def sources(tmp_path_factory) -> list[Path]:
 
 @pytest.fixture(scope="module")
 def dataset(sources, tmp_path_factory) -> Path:
-    from opend_mj.dataset import build_dataset
+    from opend_mj.assets.dataset import build_dataset
 
     out = tmp_path_factory.mktemp("ray_cabinets")
     build_dataset(sources[:2], out, workers=1, progress=False, log=lambda *a: None)
@@ -81,7 +82,9 @@ def test_ray_workers_get_egl(ray_instance):
 
 
 def test_ray_errors_are_records(ray_instance, tmp_path):
-    from opend_mj.evaluation import EpisodeJob, load_results, run_jobs
+    from opend_mj.evaluation.episode import EpisodeJob
+    from opend_mj.evaluation.pool import run_jobs
+    from opend_mj.evaluation.results import load_results
 
     bad = [EpisodeJob(cabinet="missing", cabinet_dir=str(tmp_path / "missing"), joint="joint_0", split="test",
                       hand=HAND, solver="oracle")]
@@ -92,7 +95,7 @@ def test_ray_errors_are_records(ray_instance, tmp_path):
 
 
 def test_build_dataset_on_ray_matches_local(ray_instance, sources, tmp_path):
-    from opend_mj.dataset import build_dataset
+    from opend_mj.assets.dataset import build_dataset
 
     local = build_dataset(sources, tmp_path / "local", workers=1, progress=False, log=lambda *a: None)
     on_ray = build_dataset(sources, tmp_path / "ray", backend="ray", progress=False, log=lambda *a: None)

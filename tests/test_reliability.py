@@ -22,8 +22,10 @@ import pytest
 from click.testing import CliRunner
 
 from opend_mj.cli import main
-from opend_mj.evaluation import (WALL_CLOCK_FIELDS, EpisodeJob, episode_key, load_results, make_jobs, run_jobs,
-                                 strip_wall_clock)
+from opend_mj.evaluation.episode import episode_key, EpisodeJob, strip_wall_clock, WALL_CLOCK_FIELDS
+from opend_mj.evaluation.jobs import make_jobs
+from opend_mj.evaluation.pool import run_jobs
+from opend_mj.evaluation.results import load_results
 
 HAND = "franka"  # the quickest hand
 
@@ -31,8 +33,8 @@ HAND = "franka"  # the quickest hand
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
     """Three procedural cabinets (4 doors, 4 drawers) with a manifest, built once for this module."""
-    from opend_mj.dataset import build_dataset
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.dataset import build_dataset
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("reliability")
     sources = [generate_source(i, 0, root / "src") for i in (0, 1, 4)]
@@ -155,7 +157,7 @@ def test_every_episode_an_error_exits_1(dataset, tmp_path):
 # faulty actions, unstable physics
 # --------------------------------------------------------------------------------------------------
 def _env(cabinet_dir: Path, joint="joint_0"):
-    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+    from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
     env = make_environment(EpisodeSpec(cabinet_dir=cabinet_dir, target_joint=joint, hand=HAND, seed=0),
                            TaskConfig(enable_rgbd=False, time_limit=1e6))
@@ -185,7 +187,7 @@ def test_non_finite_action_raises_at_the_task_level(dataset):
 
 def test_non_finite_action_is_an_error_record_and_the_run_goes_on(dataset, tmp_path, monkeypatch):
     """A planner that sends NaN (injected here) ends its episode as an error; the next one runs."""
-    from opend_mj.task import OpenCabinetTask
+    from opend_mj.sim.task import OpenCabinetTask
 
     make_action = OpenCabinetTask.make_action
 
@@ -217,7 +219,7 @@ def test_physics_instability_is_recorded(dataset, tmp_path, monkeypatch):
     assert ts.last()
     assert env.task.physics_warnings and "mjWARN_BADQVEL" in env.task.physics_warnings[0]["warnings"]
 
-    from opend_mj.task import OpenCabinetTask
+    from opend_mj.sim.task import OpenCabinetTask
 
     before_step = OpenCabinetTask.before_step
     calls = {"n": 0}
@@ -290,7 +292,7 @@ def test_same_seed_same_file_whatever_the_workers(dataset, tmp_path):
 
 def test_sort_keeps_other_runs_first(tmp_path):
     """Records of another run sharing the file keep their place; this run's lines go in job order."""
-    from opend_mj.evaluation import ResultsWriter, sort_results
+    from opend_mj.evaluation.results import ResultsWriter, sort_results
 
     jobs = [EpisodeJob(cabinet="c", cabinet_dir="/x", joint=f"joint_{i}", split="test", hand="h", solver="s")
             for i in range(3)]

@@ -6,8 +6,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
-from opend_mj.camera import RGBDCamera, geom_box_corners, place_camera  # noqa: E402
-from opend_mj.rooms import ROOM_NAMES, KeepOut, RoomArena  # noqa: E402
+from opend_mj.sim.camera import RGBDCamera, geom_box_corners, place_camera  # noqa: E402
+from opend_mj.sim.rooms import ROOM_NAMES, KeepOut, RoomArena  # noqa: E402
 
 BOX = (0.25, 0.45, 1.2)  # half x, half y, height of the stand-in cabinet
 
@@ -35,8 +35,10 @@ def test_room_names():
 def test_room_compiles_and_renders(room):
     arena, physics = build(room, seed=room)
     m = physics.model.ptr
-    assert m.opt.timestep == pytest.approx(0.002)
-    assert m.opt.impratio == pytest.approx(10)
+    from opend_mj.sim.physics import PHYSICS
+
+    assert m.opt.timestep == pytest.approx(PHYSICS.timestep)  # the project's options, one definition
+    assert m.opt.impratio == pytest.approx(PHYSICS.impratio) and m.opt.cone == 1  # elliptic
     assert m.vis.global_.offwidth >= 640 and m.vis.global_.offheight >= 480
     with RGBDCamera(physics, "front", 256, 256) as cam:
         rgb = cam.render_rgb()

@@ -11,7 +11,7 @@ DATA = Path(__file__).parent / "data" / "results_small.jsonl"
 
 
 def test_score_tables_exact():
-    from opend_mj.scoring import load_records, report_markdown
+    from opend_mj.evaluation.scoring import load_records, report_markdown
 
     md = report_markdown(load_records([DATA]))
     assert "# Results (9 episodes)" in md
@@ -47,7 +47,7 @@ def test_score_command_csv_and_plot(tmp_path):
 
 
 def test_duplicate_keys_last_file_wins(tmp_path):
-    from opend_mj.scoring import load_records
+    from opend_mj.evaluation.scoring import load_records
 
     lines = DATA.read_text().splitlines()
     other = tmp_path / "more.jsonl"
@@ -58,7 +58,7 @@ def test_duplicate_keys_last_file_wins(tmp_path):
 
 
 def test_record_without_type_counts_in_overall_only():
-    from opend_mj.scoring import success_table
+    from opend_mj.evaluation.scoring import success_table
 
     recs = [{"cabinet": "c", "joint": "j", "hand": "h", "solver": "s", "split": "test", "seed": 0,
              "light_scale": 1.0, "pull": "arc", "error": "boom"},

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opend_mj.rooms import ROOM_NAMES
-from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+from opend_mj.sim.rooms import ROOM_NAMES
+from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
 
 def _cabinet_with(proc_cabinets, kind):
@@ -163,7 +163,7 @@ def test_low_light_is_darker(door_case):
 
 
 def test_gymnasium_wrapper(drawer_case):
-    from opend_mj.gym_env import OpenDGymEnv
+    from opend_mj.sim.gym_env import OpenDGymEnv
 
     cabinet, target = drawer_case
     env = OpenDGymEnv(EpisodeSpec(cabinet.dir, target["joint"], "franka", seed=0))
@@ -181,7 +181,7 @@ def test_fast_environment_matches_composer_loop(drawer_case):
     """The tight substep loop must simulate exactly what composer's hook-per-substep loop does."""
     from dm_control import composer
 
-    from opend_mj.task import OpenCabinetTask, OpenDEnvironment
+    from opend_mj.sim.task import OpenCabinetTask, OpenDEnvironment
 
     cabinet, target = drawer_case
     episode = EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0)

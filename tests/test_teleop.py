@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from opend_mj.teleop import (KEYMAP, TeleopConfig, TeleopController, gamepad_motion, key_name, presses, steps,
+from opend_mj.apps.teleop import (KEYMAP, TeleopConfig, TeleopController, gamepad_motion, key_name, presses, steps,
                              teleop_config)
 
 #: procedural cabinet (index, seed) that is a single drawer with a horizontal bar handle.
@@ -19,8 +19,8 @@ HAND = "franka"
 
 @pytest.fixture(scope="module")
 def drawer_cabinet(tmp_path_factory):
-    from opend_mj.compiler import compile_cabinet
-    from opend_mj.procedural import generate_source
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
 
     root = tmp_path_factory.mktemp("teleop_cabinets")
     source = generate_source(*DRAWER_SOURCE, root / "sources")
@@ -33,7 +33,7 @@ def drawer_cabinet(tmp_path_factory):
 
 
 def _env(cabinet_dir, joint, hand=HAND, seed=0):
-    from opend_mj.task import EpisodeSpec, make_environment
+    from opend_mj.sim.task import EpisodeSpec, make_environment
 
     return make_environment(EpisodeSpec(cabinet_dir, joint, hand, seed=seed), teleop_config())
 
@@ -62,7 +62,7 @@ def _drawer_script(ctl: TeleopController) -> list:
 @pytest.fixture(scope="module")
 def recorded(drawer_cabinet, tmp_path_factory):
     """The scripted drawer episode, recorded and written to an .npz demo file."""
-    from opend_mj.demos import DemoRecorder, write_demos
+    from opend_mj.apps.demos import DemoRecorder, write_demos
 
     cabinet_dir, target = drawer_cabinet
     env = _env(cabinet_dir, target["joint"])
@@ -135,7 +135,7 @@ def test_controller_keys(drawer_cabinet):
         ctl.step(n_close)
         assert ctl.grip == 1.0 and np.allclose(ctl.action()[7:], spec.grasp_profile("horizontal"))
         # profile toggle: vertical profile and hand orientation
-        from opend_mj.hands import orientation_for_handle
+        from opend_mj.sim.hands import orientation_for_handle
 
         ctl.handle_key("g")
         assert ctl.profile == "vertical"
@@ -165,7 +165,7 @@ def test_scripted_keys_open_drawer(recorded):
 
 
 def test_demo_file_layout(recorded, drawer_cabinet):
-    from opend_mj.demos import FORMAT, OBS_KEYS, read_demos
+    from opend_mj.apps.demos import FORMAT, OBS_KEYS, read_demos
 
     demo = recorded["demo"]
     file_attrs, demos = read_demos(recorded["path"])
@@ -188,7 +188,7 @@ def test_demo_file_layout(recorded, drawer_cabinet):
 
 
 def test_replay_matches_recording(recorded):
-    from opend_mj.demos import load_demo, replay_demo
+    from opend_mj.apps.demos import load_demo, replay_demo
 
     demo, args = load_demo(recorded["path"], 0)
     result = replay_demo(demo, args)
@@ -198,7 +198,7 @@ def test_replay_matches_recording(recorded):
 
 
 def test_append_and_hdf5(recorded, tmp_path):
-    from opend_mj.demos import read_demos, write_demos
+    from opend_mj.apps.demos import read_demos, write_demos
 
     demo = recorded["demo"]
     p = tmp_path / "two.npz"
@@ -233,9 +233,9 @@ def test_teleop_help_documents_keys():
 
 
 def test_study_writes_run_records(drawer_cabinet, tmp_path):
-    from opend_mj.dataset import Manifest
-    from opend_mj.evaluation import load_results
-    from opend_mj.teleop import run_study, sample_study
+    from opend_mj.assets.layout import Manifest
+    from opend_mj.evaluation.results import load_results
+    from opend_mj.apps.teleop import run_study, sample_study
 
     cabinet_dir, target = drawer_cabinet
     cab = {"id": cabinet_dir.name, "split": "test", "path": cabinet_dir.name,

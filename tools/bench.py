@@ -8,8 +8,10 @@ Sections (each a subprocess, so that its peak memory can be read):
             default physics timestep (1/480 s) and at 1/120 s
   episodes- here: episodes/min with 1 and 2 workers (scaling); success, contact penetration and speed
             at three physics timesteps; handle solver inference ms per image
+  envs    - tools/bench_env.py: gymnasium environment steps/s, state-only and RGB-D, one process and a
+            2-process vector environment
 
-    python tools/bench.py [--quick] [--sections assets,hands,task,episodes] [--out BENCHMARKS.md]
+    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -54,7 +56,8 @@ def _tables(text: str) -> str:
 
 
 def _run_timed(jobs, workers: int) -> tuple[list[dict], float]:
-    from opend_mj.evaluation import load_results, run_jobs
+    from opend_mj.evaluation.pool import run_jobs
+    from opend_mj.evaluation.results import load_results
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "r.jsonl"
@@ -66,7 +69,7 @@ def _run_timed(jobs, workers: int) -> tuple[list[dict], float]:
 
 def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
     """Oracle episodes (allegro): workers scaling, physics timesteps, solver inference."""
-    from opend_mj.evaluation import make_jobs
+    from opend_mj.evaluation.jobs import make_jobs
 
     jobs = make_jobs(cabinets, ["allegro"], "oracle", split="test", limit=n_episodes)
     rates = {1: [], 2: []}
@@ -108,10 +111,10 @@ def episodes_section(cabinets: Path, n_episodes: int, repeats: int) -> str:
 
 def _inference_lines(cabinets: Path) -> list[str]:
     """Milliseconds per image of each shipped learned solver (CPU), on one rendered test image."""
-    from opend_mj.camera import RGBDCamera
-    from opend_mj.dataset import load_manifest
-    from opend_mj.solvers import get_solver
-    from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+    from opend_mj.sim.camera import RGBDCamera
+    from opend_mj.assets.layout import load_manifest
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
     cab, tgt = load_manifest(cabinets).targets("test")[0]
     env = make_environment(EpisodeSpec(cabinets / cab["path"], tgt["joint"], "allegro"), TaskConfig(enable_rgbd=False))
@@ -142,7 +145,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=ROOT / "BENCHMARKS.md")
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
-    parser.add_argument("--sections", default="assets,hands,task,episodes")
+    parser.add_argument("--sections", default="assets,hands,task,episodes,envs")
     parser.add_argument("--quick", action="store_true", help="smaller counts (a few minutes in all)")
     args = parser.parse_args()
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -194,6 +197,10 @@ def main() -> None:
         mem = max(before, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                   resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024.0
         body += ["## Episodes", "", text, "", f"Peak memory of one process {mem:.0f} MiB.", ""]
+    if "envs" in sections:
+        out, secs, mem = _run(["tools/bench_env.py", "--cabinets", str(args.cabinets),
+                               "--steps", "300" if quick else "1500"])
+        body += ["## Environments (gymnasium)", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
     load_after = os.getloadavg()
     header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "
                       f"on {os.cpu_count()} cores: above about 1, other work shared the cores and the worker "

@@ -6,7 +6,7 @@ Generates `--count` procedural sources, then measures
 - seconds per source to compile them cold (forced rebuild) with 1 worker and with N workers, and cached;
 - collision hulls per cabinet (boxes and convex meshes);
 - `mj_step` steps/s of each compiled cabinet alone (every door/drawer given a small initial velocity);
-- the rest checks of `opend_mj.checks` over every built cabinet: no contacts at rest, gravity drift
+- the rest checks of `opend_mj.assets.checks` over every built cabinet: no contacts at rest, gravity drift
   below 1 % of the range in 5 s, every target driven through >= 95 % of its range and back;
 and the same for the real PartNet-Mobility cabinet 45780 where `../shared/partnet-sample/45780` exists
 (cold = empty CoACD cache). Prints Markdown tables and writes `<out>/bench.json`.
@@ -26,10 +26,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from opend_mj.checks import check_cabinet, load_cabinet, steps_per_second  # noqa: E402
-from opend_mj.compiler import compile_cabinet  # noqa: E402
-from opend_mj.dataset import build_dataset  # noqa: E402
-from opend_mj.procedural import generate_sources  # noqa: E402
+from opend_mj.assets.checks import check_cabinet, load_cabinet, steps_per_second  # noqa: E402
+from opend_mj.assets.compiler import compile_cabinet  # noqa: E402
+from opend_mj.assets.dataset import build_dataset  # noqa: E402
+from opend_mj.assets.procedural import generate_sources  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "partnet-sample" / "45780"
 

@@ -9,11 +9,11 @@ import time
 import mujoco
 from dm_control import mjcf
 
-from opend_mj import hands
+from opend_mj.sim import hand_scene, hands
 
 
 def bench_alone(name: str, seconds: float) -> float:
-    root, handle = hands.build_scene(name)
+    root, handle = hand_scene.build_scene(name)
     physics = mjcf.Physics.from_mjcf_model(root)
     m, d = physics.model.ptr, physics.data.ptr
     handle.hand.set_finger_targets(physics, handle.hand.spec.open_pose)
@@ -34,8 +34,8 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---:|")
     for name in args.hands:
         alone = bench_alone(name, args.seconds)
-        rh = hands.bar_pull_trial(name, "horizontal")
-        rv = hands.bar_pull_trial(name, "vertical")
+        rh = hand_scene.bar_pull_trial(name, "horizontal")
+        rv = hand_scene.bar_pull_trial(name, "vertical")
         print(f"| {name} | {alone:.0f} | {rh.steps_per_s:.0f} | {rv.steps_per_s:.0f}"
               f" | {rh.bar_moved * 100:.1f} | {rv.bar_moved * 100:.1f} |", flush=True)
 

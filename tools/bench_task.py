@@ -32,10 +32,11 @@ import opend_mj  # noqa: F401  (chooses off-screen EGL before mujoco loads)
 import mujoco  # noqa: I001
 import numpy as np
 
-from opend_mj.camera import RGBDCamera
-from opend_mj.dataset import load_manifest
-from opend_mj.evaluation import EpisodeJob, run_episode
-from opend_mj.task import EpisodeSpec, TaskConfig, make_environment
+from opend_mj.sim.camera import RGBDCamera
+from opend_mj.assets.layout import load_manifest
+from opend_mj.evaluation.episode import EpisodeJob
+from opend_mj.evaluation.runner import run_episode
+from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
 
 class _Recorder:
@@ -69,9 +70,9 @@ class _Recorder:
 
 def _plan_episode(env, hand: str) -> tuple[_Recorder, float]:
     """Run the oracle planner on ``env`` (recording its actions); returns the recorder, loop seconds."""
-    from opend_mj.hands import load_spec
-    from opend_mj.planner import Observation, Planner, PlannerConfig, Robot
-    from opend_mj.solvers import get_solver
+    from opend_mj.sim.hands import load_spec
+    from opend_mj.policy.planner import Observation, Planner, PlannerConfig, Robot
+    from opend_mj.policy.solvers import get_solver
 
     task, physics = env.task, env.physics
     with RGBDCamera(physics, "front", 256, 256) as cam:

@@ -14,8 +14,8 @@ import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from opend_mj.camera import RGBDCamera, place_camera  # noqa: E402
-from opend_mj.rooms import ROOM_NAMES, RoomArena  # noqa: E402
+from opend_mj.sim.camera import RGBDCamera, place_camera  # noqa: E402
+from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 
 
 def render_room(room: int, seed: int, size: int, camera: str, light_scale: float, box=(0.5, 0.9, 1.2)) -> np.ndarray:

@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "render-hand": "opend_mj.commands.hands:render_hand",
     "run": "opend_mj.commands.evaluate:run",
     "score": "opend_mj.commands.evaluate:score",
+    "evaluate-solver": "opend_mj.commands.evaluate:evaluate_solver",
     "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",
     "gallery": "opend_mj.commands.render:gallery",
@@ -42,10 +43,9 @@ class LazyGroup(click.Group):
         module_name, attr = target.split(":")
         try:
             module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:  # a command whose module is not written yet
-            if exc.name and exc.name.startswith("opend_mj"):
-                return None
-            raise
+        except ImportError as exc:  # a broken install or module: say so, do not pretend the command is unknown
+            raise click.ClickException(
+                f"command {name!r} cannot be loaded: {type(exc).__name__}: {exc} (in {module_name})") from exc
         return getattr(module, attr)
 
 

@@ -10,9 +10,33 @@ told apart (more than five levels, or two targets that read the same) is invalid
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from opend_mj.config import LanguageConfig
+
+@dataclass(frozen=True)
+class LanguageConfig:
+    """Algorithm 1 of the OpenD paper: spatial labels from handle centres."""
+
+    #: Handle centres closer than this (m) along an axis count as one level.
+    level_tolerance: float = 0.04
+    vertical_labels: dict[int, tuple[str, ...]] = field(
+        default_factory=lambda: {
+            1: ("",),
+            2: ("top", "bottom"),
+            3: ("top", "middle", "bottom"),
+            4: ("top", "second top", "second bottom", "bottom"),
+            5: ("top", "second top", "middle", "second bottom", "bottom"),
+        }
+    )
+    horizontal_labels: dict[int, tuple[str, ...]] = field(
+        default_factory=lambda: {
+            1: ("",),
+            2: ("left", "right"),
+            3: ("left", "middle", "right"),
+            4: ("left", "second left", "second right", "right"),
+            5: ("left", "second left", "middle", "second right", "right"),
+        }
+    )
 
 
 class LanguageInvalid(ValueError):
@@ -105,6 +129,27 @@ def describe_instruction(instruction: str) -> Description:
             else:
                 vertical = "middle"
     return Description(vertical=vertical, horizontal=horizontal, kind=kind)
+
+
+def canonical_instruction(instruction: str) -> str:
+    """The Algorithm 1 form of an instruction or a reworded one ("open the drawer at the top on the
+    left" -> "top left drawer"), so that a model trained on Algorithm 1's wording reads any wording
+    the parser understands."""
+    return describe_instruction(instruction).instruction
+
+
+def target_kind(instruction: str) -> str:
+    """door or drawer, from an instruction's words (Algorithm 1 form or a paraphrase)."""
+    return describe_instruction(instruction).kind
+
+
+def hinge_side(instruction: str) -> str | None:
+    """'left' / 'right' where the instruction names a door's side plainly (double doors always do),
+    else None: no side, or a side counted from an end ("second left") or beside a middle level."""
+    d = describe_instruction(instruction)
+    if d.horizontal in ("left", "right") and "second" not in d.vertical and d.vertical != "middle":
+        return d.horizontal
+    return None
 
 
 #: Paraphrase templates: the same target named in other words (for robustness checks).

@@ -17,7 +17,7 @@ import click
               help="Index of the first cabinet (ids are proc_<index>).")
 def generate(count: int, seed: int, out: Path, start: int) -> None:
     """Write procedural cabinets in SAPIEN PartNet-Mobility format."""
-    from opend_mj.procedural import generate_source, generate_sources
+    from opend_mj.assets.procedural import generate_source, generate_sources
 
     if start == 0:
         paths = generate_sources(count, seed, out)

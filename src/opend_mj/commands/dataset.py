@@ -32,14 +32,14 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, no_progre
     """Compile cabinets into MJCF, filter them, split them and write the manifest."""
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
-    from opend_mj.config import CompilerConfig, DatasetConfig
-    from opend_mj.dataset import build_dataset, format_split_table, list_sources
+    from opend_mj.assets.config import CompilerConfig, DatasetConfig
+    from opend_mj.assets.dataset import build_dataset, format_split_table, list_sources
 
     config = CompilerConfig() if scale is None else dataclasses.replace(CompilerConfig(), scale=scale)
     dataset = DatasetConfig(seed=seed)
     id_list = [i.strip() for i in ids.split(",") if i.strip()] if ids else None
     if source is None:
-        from opend_mj.procedural import generate_sources
+        from opend_mj.assets.procedural import generate_sources
 
         source = out / ".sources"
         n = count or dataset.count

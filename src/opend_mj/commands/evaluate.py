@@ -8,7 +8,7 @@ import click
 
 
 def _check_hands(ctx, param, value):
-    from opend_mj.hands import list_hands
+    from opend_mj.sim.hands import list_hands
 
     known = list_hands()
     for name in value:
@@ -18,10 +18,12 @@ def _check_hands(ctx, param, value):
 
 
 def _check_solver(ctx, param, value):
-    from opend_mj.solvers import list_solvers
+    """A known solver name (or a tuple of them, for options given several times)."""
+    from opend_mj.policy.solvers import list_solvers
 
-    if value not in list_solvers():
-        raise click.BadParameter(f"unknown handle solver {value!r}; known: {', '.join(list_solvers())}", ctx, param)
+    for name in (value,) if isinstance(value, str) else value:
+        if name not in list_solvers():
+            raise click.BadParameter(f"unknown handle solver {name!r}; known: {', '.join(list_solvers())}", ctx, param)
     return value
 
 
@@ -31,7 +33,7 @@ def _check_timestep(ctx, param, value):
         return None
     from fractions import Fraction
 
-    from opend_mj.task import TaskConfig
+    from opend_mj.sim.task import TaskConfig
 
     try:
         seconds = float(Fraction(value.strip()))
@@ -73,24 +75,58 @@ def _check_cabinets(ctx, param, value):
 @click.option("--physics-timestep", "physics_timestep", default=None, callback=_check_timestep,
               help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
                    "see BENCHMARKS.md for success and penetration at each.")
-def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
-        pull, paraphrase, physics_timestep):
+@click.option("--policy", default=None, metavar="module:Class|file.py[:Class]",
+              help="Evaluate this agent instead of the planner (see README, Evaluation protocol); "
+                   "its name is the results' solver column.")
+@click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
+              help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
+@click.option("--wait", is_flag=True, default=False,
+              help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
+@click.pass_context
+def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
+        pull, paraphrase, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
-    `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments.
+    `error_reason`); 1 when every episode run this time was an error; 2 for bad arguments, or when
+    another run is writing the same --out (one writer per results file; --wait waits instead).
     """
+    import dataclasses
+
     from opend_mj.backends import BackendError
-    from opend_mj.evaluation import make_jobs, run_jobs
+    from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.evaluation.lock import ResultsLocked
+    from opend_mj.evaluation.pool import run_jobs
 
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
+    policy_spec, parsed_args = None, ()
+    if policy is not None:
+        from opend_mj.evaluation.agents import agent_name, load_agent, parse_policy_args, resolve_policy
+
+        if ctx.get_parameter_source("solver") is not click.core.ParameterSource.DEFAULT:
+            raise click.UsageError("--policy and --solver exclude each other (an agent finds the handle itself)")
+        try:
+            parsed_args = parse_policy_args(policy_args)
+            target, attr = resolve_policy(policy)
+            policy_spec = f"{target}:{attr}"
+            solver = agent_name(load_agent(policy_spec, parsed_args))
+        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
+            raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
+    elif policy_args:
+        raise click.UsageError("--policy-arg needs --policy")
     jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
                      limit=limit, video_dir=video_dir, paraphrase=paraphrase, physics_timestep=physics_timestep)
+    if policy_spec is not None:
+        jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
-        counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address)
+        counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address, wait=wait,
+                          on_wait=lambda message: click.echo(f"waiting: {message}", err=True))
+    except ResultsLocked as exc:
+        click.echo(f"error: {exc}", err=True)
+        raise SystemExit(2) from None
     except (ValueError, BackendError) as exc:  # a results file corrupt in its middle; no Ray cluster
         raise click.ClickException(str(exc)) from exc
     click.echo(f"{counts['ran']} episodes run, {counts['skipped']} already done, {counts['errors']} errors, "
@@ -106,7 +142,12 @@ def run(hands, solver, split, workers, backend, address, out, cabinets_dir, limi
 @click.option("--plot", "plot_path", type=click.Path(path_type=Path), default=None)
 def score(results, csv_path, plot_path):
     """The paper's tables from one or more results files (Markdown to stdout)."""
-    from opend_mj.scoring import load_records, plot_success, report_markdown, write_csv
+    from opend_mj.evaluation.scoring import (
+        load_records,
+        plot_success,
+        report_markdown,
+        write_csv,
+    )
 
     records = load_records(results)
     click.echo(report_markdown(records))
@@ -127,7 +168,7 @@ def score(results, csv_path, plot_path):
 @click.option("--save/--no-save", default=True, show_default=True)
 def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
     """Search finger closing and grasp depth on the first training cabinets; save hands/<hand>/grasp.json."""
-    from opend_mj.planner import search_grasp as _search
+    from opend_mj.evaluation.grasp_search import search_grasp as _search
 
     profile = _search(hand, cabinets_dir, n_cabinets=n_cabinets,
                       scales=[float(x) for x in scales.split(",")],
@@ -135,3 +176,28 @@ def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
     click.echo(f"chosen: close_scale={profile.close_scale} grasp_depth={profile.grasp_depth}")
     if save:
         click.echo(f"saved {profile.save()}")
+
+
+@click.command("evaluate-solver")
+@click.option("--solver", "solvers", multiple=True, default=("cliport",), show_default=True, callback=_check_solver,
+              help="Handle solver (repeat for several).")
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
+@click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write one JSON line per target and solver here.")
+@click.option("--progress/--no-progress", default=True)
+def evaluate_solver(solvers, cabinets_dir, split, seed, light_scale, paraphrase, limit, out, progress):
+    """Locate rate of handle solvers: render each target's scene once, grade the solver's box (no episodes)."""
+    from opend_mj.evaluation.locate import evaluate_locate, format_summary, summarise
+
+    records = []
+    for solver in solvers:
+        part = None if out is None else out.with_name(f"{out.stem}_{solver}{out.suffix}") if len(solvers) > 1 else out
+        records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
+                                   paraphrase=paraphrase, limit=limit, progress=progress, out=part)
+    click.echo(format_summary(summarise(records)))

@@ -28,7 +28,7 @@ DEFAULT_DATA = Path("out/handle-data")
 def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_prob, val_fraction, views_per_scene,
               seed, workers, progress):
     """Render labelled training images (handle boxes, instructions, affordance masks)."""
-    from opend_mj.learned.data import DataConfig, make_dataset
+    from opend_mj.policy.learned.data import DataConfig, make_dataset
 
     config = DataConfig(n_images=n_images, image_size=image_size, max_shift=max_shift, colour_prob=colour_prob,
                         val_fraction=val_fraction, views_per_scene=views_per_scene, seed=seed, split=split)
@@ -72,7 +72,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
-    from opend_mj.learned import train as T
+    from opend_mj.policy.learned import train as T
 
     if threads:
         torch.set_num_threads(threads)
@@ -88,14 +88,14 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         return
     common = dict(pretrained=pretrained, max_minutes=max_minutes, resume=resume, state_path=state, device=device, progress=progress)
     if solver == "cliport":
-        from opend_mj.learned.affordance import AffordanceConfig
+        from opend_mj.policy.learned.affordance import AffordanceConfig
 
         cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
                                text_encoder=text_encoder)
         meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
                                log=click.echo, **common)
     else:
-        from opend_mj.learned.detector import DetectorConfig
+        from opend_mj.policy.learned.detector import DetectorConfig
 
         cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
                              max_size=max(min_size, 640) if min_size else None)

@@ -27,8 +27,8 @@ def scene_options(func):
 def episode_from_options(cabinets: Path, cabinet_id: str, target: str | None, hand: str, seed: int,
                          room: int | None):
     """The EpisodeSpec the scene options name; a usage error for a missing cabinet or target."""
-    from opend_mj.cabinet import CabinetError, load_cabinet_info
-    from opend_mj.task import EpisodeSpec
+    from opend_mj.sim.cabinet import CabinetError, load_cabinet_info
+    from opend_mj.sim.task import EpisodeSpec
 
     try:
         info = load_cabinet_info(cabinets / cabinet_id)

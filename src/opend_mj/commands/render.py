@@ -6,7 +6,11 @@ from pathlib import Path
 
 import click
 
-from opend_mj.commands.options import cabinets_option, episode_from_options, scene_options
+from opend_mj.commands.options import (
+    cabinets_option,
+    episode_from_options,
+    scene_options,
+)
 
 
 @click.command("render")
@@ -18,8 +22,8 @@ from opend_mj.commands.options import cabinets_option, episode_from_options, sce
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("scene.png"), show_default=True)
 def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, out):
     """Render one episode's scene: the front camera (handle boxes drawn) beside an overview."""
-    from opend_mj.render import render_episode_views, save_png
-    from opend_mj.task import TaskConfig
+    from opend_mj.apps.render import render_episode_views, save_png
+    from opend_mj.sim.task import TaskConfig
 
     episode = episode_from_options(cabinets, cabinet_id, target, hand, seed, room)
     image = render_episode_views(episode, size=size, config=TaskConfig(light_scale=light_scale))
@@ -35,8 +39,8 @@ def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, ou
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("gallery.png"), show_default=True)
 def gallery(cabinets, count, rooms, hand, seed, out):
     """A grid of cabinets (rows) x rooms (columns) into one PNG."""
-    from opend_mj.dataset import load_manifest
-    from opend_mj.render import render_gallery, save_png
+    from opend_mj.apps.render import render_gallery, save_png
+    from opend_mj.assets.layout import load_manifest
 
     try:
         manifest = load_manifest(cabinets)

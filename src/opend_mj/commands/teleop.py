@@ -7,17 +7,21 @@ from pathlib import Path
 
 import click
 
-from opend_mj.commands.options import cabinets_option, episode_from_options, scene_options
+from opend_mj.commands.options import (
+    cabinets_option,
+    episode_from_options,
+    scene_options,
+)
 
 
 def _key_help() -> str:
-    from opend_mj.teleop import KEY_HELP  # light: numpy + hands helpers
+    from opend_mj.apps.teleop import KEY_HELP  # light: numpy + hands helpers
 
     return "\n".join(f"  {k:<13} {v}" for k, v in KEY_HELP)
 
 
 def _display():
-    from opend_mj.viewer import require_display
+    from opend_mj.apps.viewer import require_display
 
     try:
         require_display()
@@ -32,9 +36,9 @@ def _display():
 def view(cabinets, cabinet_id, target, hand, room, seed):
     """MuJoCo's interactive viewer on a task scene; the instruction is shown on screen and printed."""
     _display()
-    from opend_mj import viewer
-    from opend_mj.task import make_environment
-    from opend_mj.teleop import teleop_config
+    from opend_mj.apps import viewer
+    from opend_mj.apps.teleop import teleop_config
+    from opend_mj.sim.task import make_environment
 
     env = make_environment(episode_from_options(cabinets, cabinet_id, target, hand, seed, room), teleop_config())
     try:
@@ -49,7 +53,7 @@ _TELEOP_HELP = """Drive the hand with the keyboard (or a gamepad) in MuJoCo's vi
 One episode on --cabinet/--target, or with --study N a human study: N tasks drawn (seeded) from
 the --split of the manifest, each appended to --out in the `opend run` JSON-lines format
 (solver "human"), so `opend score` puts people beside the solvers. --record FILE saves every
-finished episode as a demonstration (.hdf5/.h5 with h5py, else .npz; see opend_mj.demos).
+finished episode as a demonstration (.hdf5/.h5 with h5py, else .npz; see opend_mj.apps.demos).
 
 \b
 Keys (click into the viewer window first):
@@ -75,11 +79,17 @@ def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, re
     if (study is None) == (cabinet_id is None):
         raise click.UsageError("give either --cabinet (one episode) or --study N")
     _display()
-    from opend_mj import viewer
-    from opend_mj.demos import DemoRecorder, write_demos
-    from opend_mj.task import make_environment
-    from opend_mj.teleop import (TeleopController, episode_record, run_study, sample_study, teleop_config,
-                                 write_record)
+    from opend_mj.apps import viewer
+    from opend_mj.apps.demos import DemoRecorder, write_demos
+    from opend_mj.apps.teleop import (
+        TeleopController,
+        episode_record,
+        run_study,
+        sample_study,
+        teleop_config,
+        write_record,
+    )
+    from opend_mj.sim.task import make_environment
 
     config = teleop_config()
     recorders = []
@@ -128,7 +138,7 @@ def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, re
             recorder.finish(ctl)
         split_name = "unknown"
         try:
-            from opend_mj.dataset import load_manifest
+            from opend_mj.assets.layout import load_manifest
 
             split_name = next((c["split"] for c in load_manifest(cabinets).cabinets if c["id"] == cabinet_id),
                               "unknown")
@@ -155,7 +165,7 @@ def replay(file, index, cabinet_dir, tolerance):
     Exits with status 1 if a replay ends more than --tolerance away from the recorded open ratio."""
     import json
 
-    from opend_mj.demos import read_demos, replay_demo
+    from opend_mj.apps.demos import read_demos, replay_demo
 
     attrs, demos = read_demos(file)
     indices = range(len(demos)) if index is None else [index]

@@ -1,0 +1,1 @@
+"""Interactive and presentation tools: viewer, teleoperation, demonstrations, renders."""

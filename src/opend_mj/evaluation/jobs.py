@@ -1,0 +1,48 @@
+"""From a compiled dataset's manifest to the list of episodes of a run, and their grouping by scene."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable
+
+from opend_mj.assets.layout import CABINET_JSON, load_manifest
+from opend_mj.evaluation.episode import EpisodeJob, scene_key
+
+
+def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str = "test", seed: int = 0,
+              light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
+              video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
+              paraphrase: int = 0, physics_timestep: float | None = None) -> list[EpisodeJob]:
+    cabinets_dir = Path(cabinets_dir)
+    manifest = load_manifest(cabinets_dir)
+    pairs = manifest.targets(split)
+    if cabinet_ids is not None:
+        ids = set(cabinet_ids)
+        pairs = [(c, t) for c, t in pairs if c["id"] in ids]
+    if limit is not None:
+        pairs = pairs[:limit]
+    jobs = []
+    for hand in hands:
+        for cab, tgt in pairs:
+            cab_dir = cabinets_dir / cab.get("path", cab["id"]) if not Path(cab.get("path", "")).is_absolute() \
+                else Path(cab["path"])
+            if not (cab_dir / CABINET_JSON).is_file():
+                cab_dir = cabinets_dir / cab["id"]
+            jobs.append(EpisodeJob(cabinet=cab["id"], cabinet_dir=str(cab_dir), joint=tgt["joint"],
+                                   split=cab["split"], hand=hand, solver=solver, seed=seed,
+                                   light_scale=light_scale, pull=pull,
+                                   video_dir=str(video_dir) if video_dir else None,
+                                   target_type=tgt.get("type"), instruction=tgt.get("instruction"),
+                                   paraphrase=paraphrase, physics_timestep=physics_timestep))
+    return jobs
+
+
+def group_jobs(jobs: list[EpisodeJob], max_size: int = 8) -> list[tuple[EpisodeJob, ...]]:
+    """Consecutive jobs with the same `scene_key`, in order, at most ``max_size`` per group."""
+    groups: list[list[EpisodeJob]] = []
+    for job in jobs:
+        if groups and len(groups[-1]) < max_size and scene_key(groups[-1][-1]) == scene_key(job):
+            groups[-1].append(job)
+        else:
+            groups.append([job])
+    return [tuple(g) for g in groups]

@@ -1,0 +1,157 @@
+"""Locate quality of a handle solver on its own (`opend evaluate-solver`), without running episodes.
+
+For every target of a split, the scene an episode would see (same cabinet, room, seed, light and
+instruction wording as `opend run`) is rendered once, the solver is asked for the named handle, and
+the answer is graded against the simulator's handle boxes of every target:
+
+* ``located``: the box centre lies inside the named handle's box (3 px margin, as the episode
+  runner's failure stages use);
+* ``wrong_handle``: it lies inside another target's handle box instead;
+* ``missed``: no box, or a centre on no handle.
+
+Both the solver's raw box and the box after the planner's depth refinement (what the planner acts on
+for learned solvers) are graded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from opend_mj.evaluation.episode import EpisodeJob  # noqa: E402
+from opend_mj.evaluation.jobs import make_jobs  # noqa: E402
+
+PAD_PX = 3.0
+
+
+@dataclass
+class LocateRecord:
+    """One target's verdict."""
+
+    cabinet: str
+    joint: str
+    split: str
+    target_type: str
+    instruction: str
+    solver: str
+    seed: int
+    light_scale: float
+    paraphrase: int
+    box: list | None
+    gt_box: list | None
+    verdict: str  # located | wrong_handle | missed
+    verdict_refined: str
+    seconds: float
+
+
+def _inside(box, u: float, v: float, pad: float = PAD_PX) -> bool:
+    return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
+
+
+def grade(box, target_joint: str, boxes: dict[str, tuple | None]) -> str:
+    """located / wrong_handle / missed for a predicted ``box`` (u0, v0, u1, v1) or None."""
+    if box is None:
+        return "missed"
+    u, v = 0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3])
+    if _inside(boxes.get(target_joint), u, v):
+        return "located"
+    if any(_inside(b, u, v) for j, b in boxes.items() if j != target_joint):
+        return "wrong_handle"
+    return "missed"
+
+
+def locate_jobs(cabinets_dir: Path, split: str = "test", seed: int = 0, light_scale: float = 1.0,
+                paraphrase: int = 0, limit: int | None = None, hand: str = "allegro") -> list[EpisodeJob]:
+    """The targets of a split as episode jobs (one hand: the hand is out of the image at the start)."""
+    return make_jobs(cabinets_dir, [hand], "oracle", split=split, seed=seed, light_scale=light_scale,
+                     limit=limit, paraphrase=paraphrase)
+
+
+def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", seed: int = 0,
+                    light_scale: float = 1.0, paraphrase: int = 0, limit: int | None = None,
+                    progress: bool = True, out: Path | None = None) -> list[LocateRecord]:
+    """Grade ``solver_name`` on every target of ``split``; writes the records to ``out`` (JSONL) if given."""
+    from tqdm import tqdm
+
+    from opend_mj.evaluation.jobs import group_jobs
+    from opend_mj.evaluation.runner import instruction_for, make_episode_env
+    from opend_mj.policy.perception import refine_box_with_depth
+    from opend_mj.policy.solvers import get_solver, needs_ground_truth
+    from opend_mj.sim.camera import RGBDCamera
+
+    jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit)
+    state: dict = {}
+    options = {"ground_truth": lambda: state["boxes"][state["joint"]]} if needs_ground_truth(solver_name) else {}
+    solver = get_solver(solver_name, **options)
+    records: list[LocateRecord] = []
+    bar = tqdm(total=len(jobs), desc=f"locate ({solver_name})", unit="target", disable=not progress,
+               dynamic_ncols=True)
+    for group in group_jobs(jobs):
+        env = make_episode_env(group[0])
+        for job in group:
+            t0 = time.perf_counter()
+            env.task.set_target(job.joint, instruction_for(job))
+            env.reset()
+            physics, task = env.physics, env.task
+            with RGBDCamera(physics, "front", task.config.image_size, task.config.image_size) as cam:
+                rgb, depth = cam.render()
+            view = task.camera_view(physics)
+            boxes = task.handle_boxes(physics)
+            state.update(boxes=boxes, joint=job.joint)
+            found = solver.solve(rgb, depth, task.instruction, view)
+            box = list(found.as_tuple()) if found is not None else None
+            refined = box
+            if found is not None and not getattr(solver, "exact", False):
+                refined = list(refine_box_with_depth(found, depth, view).as_tuple())
+            gt = boxes.get(job.joint)
+            records.append(LocateRecord(
+                cabinet=job.cabinet, joint=job.joint, split=job.split, target_type=task.target.kind,
+                instruction=task.instruction, solver=solver_name, seed=job.seed, light_scale=job.light_scale,
+                paraphrase=job.paraphrase, box=[round(x, 2) for x in box] if box else None,
+                gt_box=[round(x, 2) for x in gt] if gt else None, verdict=grade(box, job.joint, boxes),
+                verdict_refined=grade(refined, job.joint, boxes), seconds=round(time.perf_counter() - t0, 3)))
+            bar.update(1)
+            bar.set_postfix(located=f"{sum(r.verdict == 'located' for r in records)}/{len(records)}")
+        env.close()
+    bar.close()
+    if out is not None:
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text("".join(json.dumps(asdict(r)) + "\n" for r in records))
+    return records
+
+
+def summarise(records: list[LocateRecord]) -> list[dict]:
+    """Rates per (solver, kind): located, wrong handle, missed; raw box and after depth refinement."""
+    rows = []
+    solvers = sorted({r.solver for r in records})
+    for solver in solvers:
+        for kind in ("drawer", "door", "overall"):
+            rs = [r for r in records if r.solver == solver and (kind == "overall" or r.target_type == kind)]
+            if not rs:
+                continue
+            n = len(rs)
+
+            def pct(field: str, verdict: str) -> float:
+                return round(100.0 * sum(getattr(r, field) == verdict for r in rs) / n, 1)
+
+            rows.append({"solver": solver, "kind": kind, "targets": n,
+                         "located": pct("verdict", "located"), "wrong_handle": pct("verdict", "wrong_handle"),
+                         "missed": pct("verdict", "missed"),
+                         "located_refined": pct("verdict_refined", "located"),
+                         "wrong_handle_refined": pct("verdict_refined", "wrong_handle")})
+    return rows
+
+
+def format_summary(rows: list[dict]) -> str:
+    lines = ["| solver | kind | targets | located % | wrong handle % | missed % | located after depth snap % | "
+             "wrong handle after snap % |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['solver']} | {r['kind']} | {r['targets']} | {r['located']} | {r['wrong_handle']} | "
+                     f"{r['missed']} | {r['located_refined']} | {r['wrong_handle_refined']} |")
+    return "\n".join(lines)

@@ -1,0 +1,298 @@
+"""The episode runner: one episode (or a group sharing a scene) from job to record (`opend run`).
+
+One episode = (cabinet, target joint, hand, solver, seed, light scale, pull strategy). The runner
+builds the task, renders the one front RGB-D image, runs the planner and records a JSON line.
+Ground truth is used here only to label results (failure stage, success); the planner never sees it
+(except through the ``oracle`` solver, whose whole point is to hand it the true box).
+
+Reliability: an episode never raises. A task that raises (e.g. a non-finite action: ``ValueError: action has non-finite values``)
+gives an error record; a MuJoCo instability (BADQACC/BADQPOS/BADQVEL, or NaN state) ends the episode
+as a failure with ``failed_stage = "physics"`` and the warnings in ``physics_warnings``. Error
+records count as done on resume (delete their lines to retry them).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from dataclasses import replace
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+from opend_mj.evaluation.episode import EpisodeJob, record_fields  # noqa: E402
+from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder  # noqa: E402
+
+
+def _box_contains(box, u, v, pad=3.0) -> bool:
+    return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
+
+
+def run_episode(job: EpisodeJob, env=None) -> dict:
+    """Run one episode; returns its record (never raises: errors become an ``error`` record)."""
+    t0 = time.perf_counter()
+    try:
+        record = _run_episode(job, env)
+    except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
+        record = error_record(job, exc)
+    out = {**record_fields(job), **record}
+    out["wall_seconds"] = round(time.perf_counter() - t0, 3)
+    return out
+
+
+def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[dict]:
+    """Run episodes that share one `scene_key` on one scene, built once (the unit of work of a run).
+
+    Building a scene (room, cabinet, hand, compile) costs about as much as simulating an episode;
+    the episodes of one cabinet's targets differ only in the target and the instruction, and each
+    starts from a full reset, so their records are the same as with a scene each.
+    """
+    records = []
+    env = None
+    for job in jobs:
+        if env is None:
+            t0 = time.perf_counter()
+            try:
+                env = make_episode_env(job)
+            except Exception as exc:  # noqa: BLE001 (reported per episode; nothing else can run here)
+                records.append({**error_record(job, exc), "wall_seconds": round(time.perf_counter() - t0, 3)})
+                continue
+            build_s = time.perf_counter() - t0
+            rec = run_episode(job, env)
+            rec["wall_seconds"] = round(rec["wall_seconds"] + build_s, 3)
+        else:
+            rec = run_episode(job, env)
+        records.append(rec)
+        if rec.get("failed_stage") == "physics" or "error" in rec:
+            env = None  # a diverged or failed episode: the next one gets a fresh scene
+    return records
+
+
+def error_reason(exc: BaseException | str) -> str:
+    """One line saying what went wrong (the exception type and message; a file is named in it)."""
+    if isinstance(exc, str):  # a traceback's text: its last non-empty line
+        lines = [ln for ln in exc.strip().splitlines() if ln.strip()]
+        return lines[-1].strip() if lines else "unknown error"
+    return f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def error_record(job: EpisodeJob, exc: BaseException | str) -> dict:
+    """The record of an episode that could not run: ``error`` (traceback) and ``error_reason`` (one line)."""
+    if isinstance(exc, str):
+        tb = exc
+    else:
+        tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+        if not tb.startswith("Traceback"):
+            tb = "Traceback (most recent call last):\n" + tb
+    return {**record_fields(job), "success": False, "error": tb, "error_reason": error_reason(exc),
+            "error_kind": _error_kind(exc)}
+
+
+def _error_kind(exc) -> str:
+    from opend_mj.sim.cabinet import CabinetError
+
+    if isinstance(exc, CabinetError) or (isinstance(exc, str) and "CabinetError" in exc):
+        return "cabinet"
+    if isinstance(exc, ValueError) and "action" in str(exc):
+        return "action"
+    return "exception"
+
+
+class PhysicsDiverged(RuntimeError):
+    """MuJoCo reported an instability (or the state went NaN): the episode is over."""
+
+
+class _StopAtLast:
+    """The environment as the planner sees it, except that a LAST time step ends the episode.
+
+    ``OpenDEnvironment`` ends an episode on a MuJoCo instability warning; composer would *reset*
+    the episode on the next ``step``, so the planner must not step again.
+    """
+
+    def __init__(self, env):
+        self._env = env
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def step(self, action):
+        ts = self._env.step(action)
+        if ts.last():
+            warnings = self._env.task.physics_warnings
+            raise PhysicsDiverged(f"physics instability: {warnings}" if warnings else "episode ended (time limit)")
+        return ts
+
+
+def instruction_for(job: EpisodeJob) -> str | None:
+    """The job's paraphrased instruction, or None for the target's own (Algorithm 1)."""
+    if not job.paraphrase:
+        return None
+    from opend_mj.language import Description, paraphrase
+    from opend_mj.sim.cabinet import load_cabinet_info
+
+    target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
+    return paraphrase(Description(target["vertical"], target["horizontal"], target["type"]), job.paraphrase)
+
+
+def make_episode_env(job: EpisodeJob):
+    from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
+
+    spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
+                          seed=job.seed, room=job.room, instruction=instruction_for(job))
+    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
+    if job.physics_timestep is not None:
+        config = replace(config, physics_timestep=float(job.physics_timestep))
+    return make_environment(spec_ep, config)
+
+
+def _run_episode(job: EpisodeJob, env=None) -> dict:
+    """One episode. ``env``: a scene built for a job with the same `scene_key` (else a new one)."""
+    from opend_mj.policy.planner import (
+        GraspProfile,
+        Observation,
+        Planner,
+        PlannerConfig,
+        Robot,
+    )
+    from opend_mj.policy.solvers import get_solver, needs_ground_truth
+    from opend_mj.sim.camera import RGBDCamera
+    from opend_mj.sim.hands import load_spec
+
+    if env is None:
+        env = make_episode_env(job)
+    else:
+        env.task.set_target(job.joint, instruction_for(job))
+    task = env.task
+    config = task.config
+    env.reset()
+    physics = env.physics
+    target = task.target
+    instruction = task.instruction
+
+    # the one observation
+    cam = RGBDCamera(physics, "front", config.image_size, config.image_size)
+    try:
+        rgb, depth = cam.render()
+    finally:
+        cam.close()
+    view = task.camera_view(physics)
+    gt_box = task.handle_boxes(physics)[target.joint]
+
+    options = {}
+    if needs_ground_truth(job.solver):
+        options["ground_truth"] = lambda: task.handle_boxes(physics)[target.joint]
+    solver = get_solver(job.solver, **options)
+
+    # ground-truth probes for labelling only
+    probes: dict = {}
+
+    def true_handle_box():
+        corners = task.handle_corners(physics)
+        return corners.min(axis=0), corners.max(axis=0)
+
+    def on_stage(name, info):
+        if name == "grasp":
+            lo, hi = true_handle_box()
+            site = physics.bind(task.hand.grasp_site).xpos.copy()
+            outside = np.maximum(0.0, np.maximum(lo - site, site - hi))
+            probes["site_to_handle"] = float(np.linalg.norm(outside))
+            probes["t_grasp"] = float(physics.data.time)
+        elif name == "pull":
+            probes["q_pull_start"] = task.outcome(physics).range_ratio
+            probes["t_pull"] = float(physics.data.time)
+
+    video = VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
+    penetration = PenetrationProbe(physics.data.ptr)
+
+    def on_step():
+        penetration()
+        if video:
+            video.capture()
+
+    robot = Robot(_StopAtLast(env), on_step=on_step)
+    overrides = dict(job.planner_overrides)
+    pconfig = replace(PlannerConfig(pull=job.pull))
+    grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
+    if grasp is not None:
+        pconfig = grasp.apply(pconfig)
+    if overrides:
+        pconfig = replace(pconfig, **overrides)
+        grasp = None if "close_scale" in overrides or "grasp_depth" in overrides else grasp
+    planner = Planner(solver, load_spec(job.hand), pconfig, grasp=None, on_stage=on_stage)
+    if grasp is not None:
+        planner.grasp = grasp  # knob orientation
+    warnings = task.physics_warnings  # the list of this episode (a reset would make a new one)
+    try:
+        plan = planner.run(robot, Observation(rgb=rgb, depth=depth, instruction=instruction, camera_view=view))
+    except PhysicsDiverged as exc:
+        return _diverged_record(job, task, physics, instruction, gt_box, warnings, str(exc))
+    finally:
+        if video:
+            video.close()
+    outcome = task.outcome(physics)
+
+    # failure stage (ground truth, for the tables)
+    failed = None
+    if not outcome.success:
+        box = plan.box["box"] if plan.box else None
+        if box is None or gt_box is None or not _box_contains(gt_box, (box[0] + box[2]) / 2, (box[1] + box[3]) / 2):
+            failed = "locate"
+        elif probes.get("site_to_handle", 1.0) > 0.02:
+            failed = "approach"
+        elif outcome.range_ratio < 0.03:
+            failed = "grasp"
+        else:
+            failed = "pull"
+    return {
+        "cabinet_dir": job.cabinet_dir,
+        "target_type": target.kind,
+        "instruction": instruction,
+        "room": task.episode.room_index(),
+        "success": bool(outcome.success),
+        "open_ratio": float(outcome.open_ratio),
+        "range_ratio": float(outcome.range_ratio),
+        "joint_value": float(outcome.joint_value),
+        "others_moved": list(outcome.others_moved),
+        "failed_stage": failed,
+        "planner_failed_stage": plan.failed_stage,
+        "handle_kind": plan.handle["kind"] if plan.handle else None,
+        "handle_orientation": plan.handle["orientation"] if plan.handle else None,
+        "box": plan.box["box"] if plan.box else None,
+        "gt_box": [round(x, 2) for x in gt_box] if gt_box else None,
+        "site_to_handle": round(probes.get("site_to_handle", float("nan")), 4),
+        "pulled": round(plan.pulled, 4),
+        "turned_deg": round(plan.turned_deg, 2),
+        "sim_seconds": round(float(physics.data.time), 3),
+        "max_penetration_mm": round(penetration.deepest * 1000, 2),
+        "physics_warnings": list(warnings),
+        "video": str(video.path) if video else None,
+    }
+
+
+def _diverged_record(job, task, physics, instruction, gt_box, warnings, reason) -> dict:
+    """A failed episode: the physics went unstable (MuJoCo warnings in ``physics_warnings``)."""
+    try:
+        outcome = task.outcome(physics)
+        values = {"open_ratio": float(outcome.open_ratio), "range_ratio": float(outcome.range_ratio),
+                  "joint_value": float(outcome.joint_value), "others_moved": list(outcome.others_moved)}
+        values = {k: (v if not isinstance(v, float) or np.isfinite(v) else None) for k, v in values.items()}
+    except Exception:  # noqa: BLE001 (a NaN state)
+        values = {"open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
+    return {
+        "cabinet_dir": job.cabinet_dir,
+        "target_type": task.target.kind,
+        "instruction": instruction,
+        "room": task.episode.room_index(),
+        "success": False,
+        **values,
+        "failed_stage": "physics",
+        "planner_failed_stage": None,
+        "gt_box": [round(x, 2) for x in gt_box] if gt_box else None,
+        "sim_seconds": round(float(physics.data.time), 3),
+        "physics_warnings": list(warnings),
+        "failure_reason": reason,
+        "video": None,
+    }

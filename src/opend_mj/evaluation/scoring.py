@@ -1,0 +1,196 @@
+"""`opend score`: the paper's tables from results files.
+
+Success is recomputed from ``open_ratio`` at thresholds 20 / 50 / 90 % (20 % is the benchmark's).
+Error records (``"error"`` in the line) count as failures at stage ``error``. When several files hold
+the same episode key, the last one wins.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Iterable
+
+THRESHOLDS = (0.2, 0.5, 0.9)
+SPLITS = ("train", "test")
+KINDS = ("drawer", "door", "overall")
+STAGE_ORDER = ("locate", "approach", "grasp", "pull", "physics", "error")
+
+
+def load_records(paths: Iterable[Path]) -> list[dict]:
+    from opend_mj.evaluation.episode import episode_key
+    from opend_mj.evaluation.results import load_results
+
+    merged: dict[tuple, dict] = {}
+    for p in paths:
+        for r in load_results(Path(p), repair=False):
+            merged[episode_key(r)] = r
+    return list(merged.values())
+
+
+def _ok(r: dict, threshold: float) -> bool:
+    return "error" not in r and float(r.get("open_ratio") or 0.0) > threshold
+
+
+def _kind(r: dict) -> str | None:
+    """door / drawer; None for a record that says neither (it counts in "overall" only)."""
+    if r.get("target_type"):
+        return r["target_type"]
+    instruction = str(r.get("instruction", "")).strip()
+    if not instruction:
+        return None
+    from opend_mj.language import target_kind
+
+    return target_kind(instruction)
+
+
+def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
+    out: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in records:
+        out[(r["hand"], r["solver"])].append(r)
+    return dict(sorted(out.items()))
+
+
+def success_table(records: list[dict], threshold: float = 0.2) -> list[dict]:
+    """Rows (hand, solver) x columns (split, kind): success rate, count."""
+    rows = []
+    for (hand, solver), recs in groups(records).items():
+        row = {"hand": hand, "solver": solver, "threshold": threshold}
+        for split in SPLITS:
+            for kind in KINDS:
+                sel = [r for r in recs if r.get("split") == split and (kind == "overall" or _kind(r) == kind)]
+                n = len(sel)
+                k = sum(_ok(r, threshold) for r in sel)
+                row[f"{split}_{kind}"] = (k / n if n else None, k, n)
+        rows.append(row)
+    return rows
+
+
+def _fmt(cell) -> str:
+    rate, k, n = cell
+    return "-" if not n else f"{100 * rate:.1f} ({k}/{n})"
+
+
+def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
+    """Agents and solvers ranked: (hand, solver) rows by test success, then train success (20 %).
+
+    One row per (hand, solver) with its success rates, episode counts and how many episodes opened
+    a wrong target; ties keep the name order.
+    """
+    rows = []
+    for row in success_table(records, threshold):
+        recs = groups(records)[(row["hand"], row["solver"])]
+        rows.append({**row, "episodes": len(recs), "wrong_targets": sum(bool(r.get("others_moved")) for r in recs)})
+
+    def rate(cell):
+        return -1.0 if cell[0] is None else cell[0]
+
+    rows.sort(key=lambda r: (-rate(r["test_overall"]), -rate(r["train_overall"])))
+    for i, r in enumerate(rows, 1):
+        r["rank"] = i
+    return rows
+
+
+def report_markdown(records: list[dict]) -> str:
+    lines = [f"# Results ({len(records)} episodes)", ""]
+    lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
+    lines.append("")
+    lines.append("| rank | solver / agent | hand | test overall | test drawer | test door | train overall | episodes | "
+                 "wrong target opened |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
+    for r in ranking(records):
+        lines.append(f"| {r['rank']} | {r['solver']} | {r['hand']} | {_fmt(r['test_overall'])} | "
+                     f"{_fmt(r['test_drawer'])} | {_fmt(r['test_door'])} | {_fmt(r['train_overall'])} | "
+                     f"{r['episodes']} | {r['wrong_targets']} |")
+    lines.append("")
+    for th in THRESHOLDS:
+        lines.append(f"## Success rate, open ratio > {int(round(th * 100))} %")
+        lines.append("")
+        head = "| hand | solver | " + " | ".join(f"{s} {k}" for s in SPLITS for k in KINDS) + " |"
+        lines.append(head)
+        lines.append("|" + "---|" * (2 + len(SPLITS) * len(KINDS)))
+        for row in success_table(records, th):
+            cells = [_fmt(row[f"{s}_{k}"]) for s in SPLITS for k in KINDS]
+            lines.append(f"| {row['hand']} | {row['solver']} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines.append("## Failure stages (episodes below 20 %)")
+    lines.append("")
+    lines.append("| hand | solver | split | failures | " + " | ".join(STAGE_ORDER) + " |")
+    lines.append("|" + "---|" * (4 + len(STAGE_ORDER)))
+    for (hand, solver), recs in groups(records).items():
+        for split in SPLITS:
+            fails = [r for r in recs if r.get("split") == split and not _ok(r, 0.2)]
+            if not [r for r in recs if r.get("split") == split]:
+                continue
+            c = Counter("error" if "error" in r else (r.get("failed_stage") or "pull") for r in fails)
+            lines.append(f"| {hand} | {solver} | {split} | {len(fails)} | "
+                         + " | ".join(str(c.get(s, 0)) for s in STAGE_ORDER) + " |")
+    lines.append("")
+    lines.append("## Wrong targets opened")
+    lines.append("")
+    lines.append("| hand | solver | split | episodes | with another target moved | of which successes |")
+    lines.append("|---|---|---|---|---|---|")
+    for (hand, solver), recs in groups(records).items():
+        for split in SPLITS:
+            sel = [r for r in recs if r.get("split") == split]
+            if not sel:
+                continue
+            wrong = [r for r in sel if r.get("others_moved")]
+            lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(wrong)} | "
+                         f"{sum(_ok(r, 0.2) for r in wrong)} |")
+    lines.append("")
+    lines.append("## Time per episode (mean)")
+    lines.append("")
+    lines.append("| hand | solver | episodes | sim s | wall s |")
+    lines.append("|---|---|---|---|---|")
+    for (hand, solver), recs in groups(records).items():
+        sims = [float(r["sim_seconds"]) for r in recs if r.get("sim_seconds") is not None]
+        walls = [float(r["wall_seconds"]) for r in recs if r.get("wall_seconds") is not None]
+        lines.append(f"| {hand} | {solver} | {len(recs)} | {sum(sims) / max(1, len(sims)):.2f} | "
+                     f"{sum(walls) / max(1, len(walls)):.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(records: list[dict], path: Path) -> Path:
+    path = Path(path)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["hand", "solver", "threshold", "split", "kind", "success_rate", "successes", "episodes"])
+        for th in THRESHOLDS:
+            for row in success_table(records, th):
+                for s in SPLITS:
+                    for k in KINDS:
+                        rate, n_ok, n = row[f"{s}_{k}"]
+                        w.writerow([row["hand"], row["solver"], th, s, k,
+                                    "" if rate is None else f"{rate:.4f}", n_ok, n])
+    return path
+
+
+def plot_success(records: list[dict], path: Path, threshold: float = 0.2) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    rows = success_table(records, threshold)
+    labels = [f"{r['hand']}\n{r['solver']}" for r in rows]
+    # only the split x kind columns that hold episodes
+    cols = [(s, k) for s in SPLITS for k in KINDS if any(r[f"{s}_{k}"][2] for r in rows)]
+    x = np.arange(len(rows))
+    width = 0.8 / len(cols)
+    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(rows)), 4))
+    for i, (s, k) in enumerate(cols):
+        vals = [100 * (r[f"{s}_{k}"][0] or 0.0) for r in rows]
+        ax.bar(x + (i - (len(cols) - 1) / 2) * width, vals, width, label=f"{s} {k}")
+    ax.set_xticks(x)
+    ax.set_xticklabels(labels)
+    ax.set_ylabel(f"success (%), open ratio > {int(threshold * 100)} %")
+    ax.set_ylim(0, 105)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)

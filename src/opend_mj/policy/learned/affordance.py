@@ -1,0 +1,261 @@
+"""The ``cliport`` handle solver: a language-conditioned per-pixel affordance map (CLIPort-style).
+
+Model (:class:`AffordanceNet`):
+
+* image stream: torchvision ``resnet18(weights=None)`` (conv1 widened to RGB + depth + two
+  coordinate channels) up to ``layer3`` (stride 16; ``depth=4`` adds ``layer4``, stride 32);
+* language stream: a frozen text encoder (:mod:`opend_mj.policy.learned.text`, MiniLM by default) whose
+  sentence embedding is projected by a small MLP per fusion layer;
+* decoder: upsampling blocks with skip connections from the ResNet stages back to 1/2 resolution;
+  the text is fused into the first ``fusion_layers`` (2, 3 or 4) decoder stages, counted from the
+  bottleneck, either FiLM (``x * (1 + gamma(t)) + beta(t)``) or CLIPort's elementwise product with
+  projected text features (``x * p(t)``);
+* head: one logit per pixel at 1/2 resolution, upsampled to the input size. Trained with binary
+  cross-entropy (positive weight for the rare handle pixels) against the instructed target's handle
+  mask (from the training renders, dilated by one pixel).
+
+Inference (:class:`CLIPortSolver`): the handle centre is the probability-weighted centroid of the
+connected region above half the peak around the arg-max; the box is that region's bounding box
+(at least ``min_box`` px on each side); the orientation comes from the region's principal axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_CHECKPOINT = Path("checkpoints/cliport.pt")
+DEPTH_MEAN, DEPTH_SCALE = 2.5, 1.0
+
+
+@dataclass(frozen=True)
+class AffordanceConfig:
+    fusion_layers: int = 3  # 2, 3 or 4
+    fusion: str = "film"  # "film" | "product"
+    depth: int = 3  # ResNet-18 stages used (3: up to layer3, 4: all)
+    text_encoder: str = "minilm"
+    text_dim: int = 384
+    image_size: int = 256  # input resolution (renders are resized to it)
+    decoder_width: int = 1  # multiplier of the decoder widths (1: 128, 64, 32)
+
+
+def _torch():
+    import torch
+    import torch.nn as nn
+    import torch.nn.functional as F
+
+    return torch, nn, F
+
+
+def build_model(config: AffordanceConfig = AffordanceConfig()):
+    torch, nn, F = _torch()
+    import torchvision
+
+    if config.fusion_layers not in (2, 3, 4):
+        raise ValueError("fusion_layers must be 2, 3 or 4")
+    if config.fusion not in ("film", "product"):
+        raise ValueError("fusion must be 'film' or 'product'")
+
+    class Up(nn.Module):
+        def __init__(self, cin, cskip, cout):
+            super().__init__()
+            self.conv = nn.Sequential(
+                nn.Conv2d(cin + cskip, cout, 3, padding=1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+                nn.Conv2d(cout, cout, 3, padding=1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True))
+
+        def forward(self, x, skip):
+            x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            return self.conv(torch.cat([x, skip], 1))
+
+    class Fuse(nn.Module):
+        def __init__(self, text_dim, channels, mode):
+            super().__init__()
+            self.mode = mode
+            out = 2 * channels if mode == "film" else channels
+            self.proj = nn.Sequential(nn.Linear(text_dim, 256), nn.ReLU(inplace=True), nn.Linear(256, out))
+            nn.init.zeros_(self.proj[-1].weight)
+            nn.init.zeros_(self.proj[-1].bias)
+            if mode == "product":
+                nn.init.ones_(self.proj[-1].bias)
+
+        def forward(self, x, t):
+            p = self.proj(t)[:, :, None, None]
+            if self.mode == "film":
+                gamma, beta = p.chunk(2, dim=1)
+                return x * (1 + gamma) + beta
+            return x * p
+
+    class AffordanceNet(nn.Module):
+        def __init__(self, cfg: AffordanceConfig):
+            super().__init__()
+            self.cfg = cfg
+            r = torchvision.models.resnet18(weights=None)
+            r.conv1 = nn.Conv2d(6, 64, 7, stride=2, padding=3, bias=False)  # RGB, depth, u, v
+            self.stem = nn.Sequential(r.conv1, r.bn1, r.relu)  # 1/2, 64
+            self.pool = r.maxpool
+            self.layer1, self.layer2, self.layer3 = r.layer1, r.layer2, r.layer3  # 1/4 64, 1/8 128, 1/16 256
+            self.layer4 = r.layer4 if cfg.depth == 4 else None  # 1/32 512
+            w = cfg.decoder_width
+            chans = []
+            if self.layer4 is not None:
+                self.up4 = Up(512, 256, 256 * w)
+                bottom = 256 * w
+            else:
+                self.up4 = None
+                bottom = 256
+            self.up3 = Up(bottom, 128, 128 * w)
+            self.up2 = Up(128 * w, 64, 64 * w)
+            self.up1 = Up(64 * w, 64, 32 * w)
+            chans = [bottom, 128 * w, 64 * w, 32 * w]  # fusion points, from the bottleneck up
+            self.fuse = nn.ModuleList(Fuse(cfg.text_dim, c, cfg.fusion) for c in chans[: cfg.fusion_layers])
+            self.head = nn.Conv2d(32 * w, 1, 1)
+            nn.init.constant_(self.head.bias, -4.0)
+
+        def forward(self, image, text):
+            """image (B, 6, H, W) normalised; text (B, text_dim) -> logits (B, 1, H, W)."""
+            s1 = self.stem(image)
+            s2 = self.layer1(self.pool(s1))
+            s3 = self.layer2(s2)
+            x = self.layer3(s3)
+            if self.layer4 is not None:
+                x = self.up4(self.layer4(x), x)
+            feats = []
+            stages = [lambda y: y, lambda y: self.up3(y, s3), lambda y: self.up2(y, s2), lambda y: self.up1(y, s1)]
+            for k, stage in enumerate(stages):
+                x = stage(x)
+                if k < len(self.fuse):
+                    x = self.fuse[k](x, text)
+                feats.append(x)
+            logits = self.head(x)
+            return F.interpolate(logits, size=image.shape[-2:], mode="bilinear", align_corners=False)
+
+    return AffordanceNet(config)
+
+
+def prepare_image(rgb: np.ndarray, depth: np.ndarray, size: int | None = None):
+    """(6, H, W) float tensor: RGB in [0, 1] minus 0.5, normalised depth, u and v in [-1, 1]."""
+    torch, _, F = _torch()
+    h, w = depth.shape
+    x = torch.empty(6, h, w)
+    x[:3] = torch.from_numpy(np.array(rgb, copy=True)).permute(2, 0, 1).float().div(255.0) - 0.5
+    d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
+    x[3] = (torch.from_numpy(d).clamp(0, 10) - DEPTH_MEAN) / DEPTH_SCALE
+    x[4] = torch.linspace(-1, 1, w)[None, :].expand(h, w)
+    x[5] = torch.linspace(-1, 1, h)[:, None].expand(h, w)
+    if size is not None and size != h:
+        x = F.interpolate(x[None], size=(size, size), mode="bilinear", align_corners=False)[0]
+    return x
+
+
+def target_mask(mask: np.ndarray, value: int, dilate: int = 1) -> np.ndarray:
+    m = mask == value
+    if dilate > 0 and m.any():
+        from scipy.ndimage import binary_dilation
+
+        m = binary_dilation(m, iterations=dilate)
+    return m.astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------------
+# From an affordance map to a handle box
+# --------------------------------------------------------------------------------------------------
+
+
+def map_to_box(prob: np.ndarray, rel: float = 0.5, min_box: float = 4.0):
+    """(centre (u, v), box (u0, v0, u1, v1), orientation, peak) from a probability map (H, W)."""
+    from scipy.ndimage import label
+
+    h, w = prob.shape
+    r, c = np.unravel_index(int(np.argmax(prob)), prob.shape)
+    peak = float(prob[r, c])
+    region, _ = label(prob >= rel * peak)
+    sel = region == region[r, c]
+    rr, cc = np.nonzero(sel)
+    wts = prob[rr, cc].astype(np.float64)
+    wts = wts / max(wts.sum(), 1e-12)
+    uc, vc = float((cc + 0.5) @ wts), float((rr + 0.5) @ wts)
+    u0, u1 = cc.min(), cc.max() + 1.0
+    v0, v1 = rr.min(), rr.max() + 1.0
+    if len(rr) >= 3:
+        cov = np.cov(np.stack([cc, rr]).astype(float), aweights=wts + 1e-12)
+        evals, evecs = np.linalg.eigh(cov)
+        major = evecs[:, -1]
+        elong = float(evals[-1] / max(evals[0], 1e-6))
+        orientation = ("horizontal" if abs(major[0]) >= abs(major[1]) else "vertical") if elong > 2.0 else None
+    else:
+        orientation = None
+    half = min_box / 2
+    u0, u1 = min(u0, uc - half), max(u1, uc + half)
+    v0, v1 = min(v0, vc - half), max(v1, vc + half)
+    box = (float(max(0, u0)), float(max(0, v0)), float(min(w, u1)), float(min(h, v1)))
+    return (uc, vc), box, orientation, peak
+
+
+# --------------------------------------------------------------------------------------------------
+# Checkpoints and the solver
+# --------------------------------------------------------------------------------------------------
+
+_TEXT_ENCODERS: dict = {}
+
+
+def load_affordance(checkpoint: Path | str | None = None, device: str | None = None):
+    """(model in eval mode, config, text encoder, checkpoint dict), cached per path and device."""
+    from opend_mj.policy.learned import load_checkpoint
+    from opend_mj.policy.learned.text import CachedEncoder
+
+    def build(ckpt):
+        config = AffordanceConfig(**ckpt["config"])
+        return build_model(config), config
+
+    model, config, ckpt = load_checkpoint(checkpoint, DEFAULT_CHECKPOINT, "CLIPort",
+                                          "opend train --solver cliport", build, device)
+    if id(ckpt) not in _TEXT_ENCODERS:  # one encoder per loaded (and kept) checkpoint
+        _TEXT_ENCODERS[id(ckpt)] = CachedEncoder.from_state(ckpt["text"])
+    return model, config, _TEXT_ENCODERS[id(ckpt)], ckpt
+
+
+def predict(model, config: AffordanceConfig, text, rgb, depth, instruction: str) -> np.ndarray:
+    """Probability map (H, W) at the image's resolution."""
+    torch, _, F = _torch()
+    device = next(model.parameters()).device
+    x = prepare_image(rgb, depth, config.image_size)[None].to(device)
+    t = torch.from_numpy(text.encode([instruction])).to(device)
+    with torch.no_grad():
+        logits = model(x, t)
+        h, w = depth.shape
+        if logits.shape[-1] != w or logits.shape[-2] != h:
+            logits = F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False)
+    return torch.sigmoid(logits)[0, 0].cpu().numpy()
+
+
+class CLIPortSolver:
+    """Handle solver: language-conditioned affordance map -> handle centre, box and orientation."""
+
+    name = "cliport"
+    needs_ground_truth = False
+
+    def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
+                 canonical: bool = True):
+        self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
+        self.min_box = min_box
+        #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
+        #: so reworded instructions reach the model in the wording it was trained on.
+        self.canonical = canonical
+        self.last_map: np.ndarray | None = None
+
+    def solve(self, rgb, depth, instruction, camera_view):
+        from opend_mj.language import canonical_instruction
+        from opend_mj.policy.handle import HandleBox
+
+        if self.canonical:
+            instruction = canonical_instruction(instruction)
+        prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
+        self.last_map = prob
+        _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
+        return HandleBox(*box, orientation=orientation, score=peak)
+
+
+def config_dict(config: AffordanceConfig) -> dict:
+    return asdict(config)

@@ -1,0 +1,85 @@
+"""Handle solvers: find the instructed handle's box in the front camera image.
+
+One small interface, :class:`~opend_mj.policy.handle.HandleSolver`::
+
+    solver.solve(rgb, depth, instruction, camera_view) -> HandleBox | None
+
+``rgb`` is (H, W, 3) uint8, ``depth`` (H, W) float metres (planar), ``instruction`` the language
+instruction ("second top left drawer"), ``camera_view`` an :class:`opend_mj.sim.camera.CameraView`
+(intrinsics and pose). ``None`` means "no handle found" (the episode fails at the locate stage).
+
+Solvers are made through a registry, ``get_solver(name, **options)``; a later module adds
+``fasterrcnn`` and ``cliport`` with :func:`register_solver`. The ``oracle`` solver returns the
+simulator's ground-truth box of the target handle; it gets that box through its constructor
+(``ground_truth``: a callable returning ``(u0, v0, u1, v1)`` or ``None``), never through globals.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Callable
+
+from opend_mj.policy.handle import HandleBox, HandleSolver
+
+
+class OracleSolver:
+    """Ground truth: the simulator's image box of the target's handle.
+
+    ``ground_truth`` is a callable that returns the target handle's box ``(u0, v0, u1, v1)`` (or
+    ``None`` if it is out of view), e.g. ``lambda: task.handle_boxes(physics)[task.target.joint]``.
+    """
+
+    name = "oracle"
+    needs_ground_truth = True
+    #: its boxes are exact: the planner does not refine them
+    exact = True
+
+    def __init__(self, ground_truth: Callable[[], tuple[float, float, float, float] | None] | None = None):
+        if ground_truth is None:
+            raise ValueError("the oracle solver needs ground_truth= (a callable returning the target's box)")
+        self._ground_truth = ground_truth
+
+    def solve(self, rgb, depth, instruction, camera_view) -> HandleBox | None:
+        box = self._ground_truth()
+        if box is None:
+            return None
+        return HandleBox(*map(float, box))
+
+
+#: name -> factory(**options) or "module:attribute" (imported on first use).
+_REGISTRY: dict[str, Callable[..., HandleSolver] | str] = {
+    "oracle": OracleSolver,
+    "fasterrcnn": "opend_mj.policy.learned.detector:FasterRCNNSolver",  # checkpoints/fasterrcnn.pt
+    "cliport": "opend_mj.policy.learned.affordance:CLIPortSolver",  # checkpoints/cliport.pt
+}
+
+
+def register_solver(name: str, factory: Callable[..., HandleSolver] | str, *, overwrite: bool = False) -> None:
+    """Register a solver factory (a class or callable taking keyword options, or "module:attr")."""
+    if name in _REGISTRY and not overwrite and _REGISTRY[name] is not factory:
+        raise ValueError(f"solver {name!r} is already registered (pass overwrite=True)")
+    _REGISTRY[name] = factory
+
+
+def list_solvers() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def solver_factory(name: str) -> Callable[..., HandleSolver]:
+    if name not in _REGISTRY:
+        raise KeyError(f"unknown handle solver {name!r}; known: {', '.join(list_solvers())}")
+    factory = _REGISTRY[name]
+    if isinstance(factory, str):
+        module, attr = factory.split(":")
+        factory = getattr(importlib.import_module(module), attr)
+        _REGISTRY[name] = factory
+    return factory
+
+
+def needs_ground_truth(name: str) -> bool:
+    return bool(getattr(solver_factory(name), "needs_ground_truth", False))
+
+
+def get_solver(name: str, **options) -> HandleSolver:
+    """A solver instance. Options are passed to its factory (``ground_truth=`` for ``oracle``)."""
+    return solver_factory(name)(**options)

@@ -1,0 +1,561 @@
+"""Environments over the whole dataset: each reset samples a cabinet, a target, a room and a hand start.
+
+`OpenDCore` is the engine behind the gymnasium environments (`opend_mj.sim.gym_env`, ids
+``opend/OpenCabinet-v0``, ``opend/OpenDrawer-v0``, ``opend/OpenDoor-v0``) and the dm_env one
+(`OpenDDmEnv` here). One episode is one (cabinet, target) pair of a split of a compiled dataset, one
+of the nine rooms with one of ``room_variants`` appearance seeds, and the hand's benchmark start
+(beside the cabinet, out of the camera's view) shifted by up to ``start_noise`` metres per axis and
+turned by up to ``start_yaw_noise`` radians about z. Everything is drawn from the reset seed, so
+``reset(seed=s)`` gives the same episode and the same first observation every time.
+
+Compiled scenes are reused as `opend run` reuses them: a scene is keyed by (cabinet, room,
+appearance seed); another target of the same cabinet is set with ``Task.set_target`` and a full
+reset, which gives the same state as a scene of its own. The last ``max_scenes`` scenes are kept.
+
+Observations (``obs_mode``): ``"state"`` renders nothing; ``"rgbd"`` adds the front camera's RGB and
+depth and its intrinsics and pose. ``privileged=True`` adds ground truth (the instructed handle's
+box and the open ratio) for RL from state; the benchmark's agents never get it. See the README's
+"Environments" section for the table of keys and action dimensions per hand.
+
+Actions (``control``): ``"delta"`` (default): ``6 + n_fingers`` numbers in [-1, 1]: root
+translation in the world frame (x 1.25 cm: the root's top speed of 0.75 m/s over one 1/60 s control
+step), root rotation as a world-frame rotation vector (x 0.0667 rad: 4 rad/s over one step), both
+applied to the current mocap pose (the pose the root is being pulled to), then one number per finger
+actuator mapping [-1, 1] onto its control range (absolute joint targets). ``"absolute"``: the task's
+own action: root target position (m, world), root quaternion (w, x, y, z), finger targets (the
+actuators' units). The root only ever moves through the mocap body, at bounded speed; the fingers
+through their position actuators.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import dm_env  # noqa: E402
+import numpy as np  # noqa: E402
+from dm_env import specs  # noqa: E402
+
+from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
+from opend_mj.language import describe_instruction  # noqa: E402
+from opend_mj.sim.hands import get_hand, load_spec  # noqa: E402
+from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, RewardProbe, dense_reward, sparse_reward  # noqa: E402
+from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
+from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
+from opend_mj.transforms import axis_angle_quat, mat_to_quat, quat_mul, turn_about_z  # noqa: E402
+
+OBS_MODES = ("state", "rgbd")
+CONTROLS = ("delta", "absolute")
+INSTRUCTION_MODES = ("onehot", "text")
+
+#: Labels of the instruction one-hot code (Algorithm 1's words; "" = the word is not needed).
+VERTICAL_LABELS = ("", "top", "second top", "middle", "second bottom", "bottom")
+HORIZONTAL_LABELS = ("", "left", "second left", "middle", "second right", "right")
+KIND_LABELS = ("drawer", "door")
+INSTRUCTION_DIM = len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + len(KIND_LABELS)
+
+#: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state).
+PROPRIO_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", "grasp_site_pos",
+                "grasp_site_quat", "mocap_pos", "mocap_quat", "time")
+CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
+#: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
+PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
+
+#: Root position bounds of the absolute action space (the task clips to the cabinet's bounds +- 1.5 m).
+ABSOLUTE_ROOT_LOW = (-3.0, -3.0, 0.0)
+ABSOLUTE_ROOT_HIGH = (3.0, 3.0, 3.0)
+
+
+def instruction_onehot(text: str) -> np.ndarray:
+    """A 14-number code of an Algorithm 1 instruction: vertical (6), horizontal (6), door/drawer (2)."""
+    d = describe_instruction(text)
+    code = np.zeros(INSTRUCTION_DIM, dtype=np.float32)
+    code[VERTICAL_LABELS.index(d.vertical) if d.vertical in VERTICAL_LABELS else 0] = 1.0
+    code[len(VERTICAL_LABELS) + (HORIZONTAL_LABELS.index(d.horizontal) if d.horizontal in HORIZONTAL_LABELS
+                                 else 0)] = 1.0
+    code[len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + KIND_LABELS.index(d.kind)] = 1.0
+    return code
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything an environment over the dataset is built from (the keyword arguments of gym.make)."""
+
+    hand: str = "allegro"
+    split: str = "train"  # "train" | "test" | "all"
+    cabinets: str = "cabinets"  # a compiled dataset (with manifest.json)
+    cabinet_ids: tuple[str, ...] | None = None  # restrict to these cabinets
+    target_types: tuple[str, ...] = ("drawer", "door")
+    obs_mode: str = "state"
+    privileged: bool = False
+    instruction: str = "onehot"  # "onehot" (14 numbers) | "text" (gymnasium Text)
+    control: str = "delta"
+    reward_mode: str = "dense"
+    image_size: int = 256
+    time_limit: float = 15.0  # s of simulated time (900 control steps at 60 Hz)
+    physics_timestep: float | None = None  # None: TaskConfig's (1/480 s)
+    success_threshold: float = 0.2
+    terminate_on_success: bool = True
+    room_variants: int = 8  # appearance seeds per room
+    start_noise: float = 0.05  # m, per axis, around the benchmark's hand start
+    start_yaw_noise: float = 0.15  # rad
+    max_scenes: int = 4  # compiled scenes kept for reuse
+    dense: DenseRewardConfig = field(default_factory=DenseRewardConfig)
+
+    def __post_init__(self):
+        checks = {"obs_mode": OBS_MODES, "control": CONTROLS, "instruction": INSTRUCTION_MODES,
+                  "reward_mode": REWARD_MODES, "split": ("train", "test", "all")}
+        for name, allowed in checks.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, not {getattr(self, name)!r}")
+        if not set(self.target_types) <= {"drawer", "door"} or not self.target_types:
+            raise ValueError(f"target_types must name drawer and/or door, not {self.target_types!r}")
+        if self.room_variants < 1 or self.max_scenes < 1 or self.image_size < 16:
+            raise ValueError("room_variants and max_scenes must be >= 1 and image_size >= 16")
+
+    def task_config(self) -> TaskConfig:
+        config = TaskConfig(enable_rgbd=False, image_size=self.image_size, time_limit=self.time_limit,
+                            success_threshold=self.success_threshold)
+        if self.physics_timestep is not None:
+            config = replace(config, physics_timestep=float(self.physics_timestep))
+        return config
+
+
+@dataclass(frozen=True)
+class SampledEpisode:
+    """One episode of an environment over the dataset (all drawn from ``seed``)."""
+
+    seed: int
+    cabinet: str
+    cabinet_dir: str
+    joint: str
+    target_type: str
+    instruction: str
+    split: str
+    room: int
+    scene_seed: int
+    start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_yaw: float = 0.0
+
+    @property
+    def scene_key(self) -> tuple:
+        return (self.cabinet_dir, self.room, self.scene_seed)
+
+
+class EpisodeSampler:
+    """(cabinet, target) pairs of a split of a compiled dataset, and episodes drawn from a seed."""
+
+    def __init__(self, config: EnvConfig):
+        self.config = config
+        root = Path(config.cabinets)
+        manifest = load_manifest(root)
+        ids = set(config.cabinet_ids) if config.cabinet_ids is not None else None
+        self.pairs: list[tuple[dict, dict, str]] = []
+        for cab, tgt in manifest.targets(config.split):
+            if ids is not None and cab["id"] not in ids:
+                continue
+            if tgt.get("type") not in config.target_types:
+                continue
+            cab_dir = root / cab.get("path", cab["id"])
+            if not (cab_dir / CABINET_JSON).is_file():
+                cab_dir = root / cab["id"]
+            self.pairs.append((cab, tgt, str(cab_dir)))
+        if not self.pairs:
+            raise ValueError(f"no {'/'.join(config.target_types)} targets in split {config.split!r} of {root}"
+                             + (f" among cabinets {sorted(ids)}" if ids is not None else ""))
+
+    def sample(self, seed: int) -> SampledEpisode:
+        c = self.config
+        rng = np.random.default_rng([int(seed), 16])
+        cab, tgt, cab_dir = self.pairs[int(rng.integers(len(self.pairs)))]
+        room = int(rng.integers(len(ROOM_NAMES)))
+        scene_seed = int(rng.integers(c.room_variants))
+        offset = rng.uniform(-c.start_noise, c.start_noise, 3) if c.start_noise > 0 else np.zeros(3)
+        yaw = float(rng.uniform(-c.start_yaw_noise, c.start_yaw_noise)) if c.start_yaw_noise > 0 else 0.0
+        return SampledEpisode(seed=int(seed), cabinet=cab["id"], cabinet_dir=cab_dir, joint=tgt["joint"],
+                              target_type=tgt["type"], instruction=tgt["instruction"], split=cab["split"],
+                              room=room, scene_seed=scene_seed, start_offset=tuple(float(x) for x in offset),
+                              start_yaw=yaw)
+
+    def fixed(self, seed: int, options: dict) -> SampledEpisode:
+        """The sampled episode with the fields ``options`` names replaced (cabinet, target, room, ...)."""
+        episode = self.sample(seed)
+        if "cabinet" in options or "target" in options:
+            cabinet, joint = options.get("cabinet", episode.cabinet), options.get("target")
+            match = [(c, t, d) for c, t, d in self.pairs if c["id"] == cabinet and joint in (None, t["joint"])]
+            if not match:
+                raise ValueError(f"no target {options.get('target', '(any)')!r} of cabinet {cabinet!r} in this "
+                                 f"environment's split and target types")
+            cab, tgt, cab_dir = match[0]
+            episode = replace(episode, cabinet=cab["id"], cabinet_dir=cab_dir, joint=tgt["joint"],
+                              target_type=tgt["type"], instruction=tgt["instruction"], split=cab["split"])
+        changes = {k: options[k] for k in ("room", "scene_seed", "start_yaw") if k in options}
+        if "start_offset" in options:
+            changes["start_offset"] = tuple(float(x) for x in options["start_offset"])
+        return replace(episode, **changes)
+
+
+class StartPoseTask(OpenCabinetTask):
+    """The benchmark task with the hand's start shifted (position offset, yaw about z) at reset."""
+
+    start_offset = (0.0, 0.0, 0.0)
+    start_yaw = 0.0
+
+    def initial_root_pose(self, physics):
+        pos, quat = super().initial_root_pose(physics)
+        if any(self.start_offset):
+            pos = pos + np.asarray(self.start_offset, float)
+        if self.start_yaw:
+            quat = turn_about_z(quat, self.start_yaw)
+        return pos, quat
+
+
+class SceneReader:
+    """Reads observations (the agent's inputs, optionally ground truth) from one compiled scene.
+
+    Every value is float64 straight from MjData (what the planner's own reads give); renders only
+    when asked. ``close()`` frees the renderer.
+    """
+
+    def __init__(self, env, image_size: int):
+        self.env = env
+        self.task = task = env.task
+        physics = env.physics
+        self.physics = physics
+        self.image_size = int(image_size)
+        self._data = physics.data.ptr
+        self._qpos = np.array([int(a) for a in physics.bind(task.hand.joints).qposadr])
+        self._qvel = np.array([int(a) for a in physics.bind(task.hand.joints).dofadr])
+        self._root = physics.model.name2id(task.hand.root_body.full_identifier, "body")
+        self._site = int(physics.bind(task.hand.grasp_site).element_id)
+        self._free_dof = int(physics.bind(task.mocap.freejoint).dofadr)
+        self._mocap = task.mocap.mocap_id(physics)
+        self.probe = RewardProbe(task, physics)
+        self._camera = None
+
+    def proprio(self) -> dict:
+        d = self._data
+        return {
+            "hand_qpos": d.qpos[self._qpos],
+            "hand_qvel": d.qvel[self._qvel],
+            "root_pos": d.xpos[self._root].copy(),
+            "root_quat": d.xquat[self._root].copy(),
+            "root_vel": d.qvel[self._free_dof:self._free_dof + 6].copy(),
+            "grasp_site_pos": d.site_xpos[self._site].copy(),
+            "grasp_site_quat": mat_to_quat(d.site_xmat[self._site].reshape(3, 3)),
+            "mocap_pos": d.mocap_pos[self._mocap].copy(),
+            "mocap_quat": d.mocap_quat[self._mocap].copy(),
+            "time": np.array([float(d.time)]),
+        }
+
+    def camera_view(self):
+        return self.task.camera_view(self.physics)
+
+    def camera_arrays(self) -> dict:
+        view = self.camera_view()
+        pose = np.eye(4)
+        pose[:3, :3] = view.rot
+        pose[:3, 3] = view.pos
+        return {"camera_K": view.intrinsics.matrix, "camera_pose": pose}
+
+    #: The one reader per process whose renderer is open. Renderers of several models open at once
+    #: on the process's shared GL context give images that depend on which was made last (textures),
+    #: so a scene's renderer is closed when another scene renders.
+    _rendering: "SceneReader | None" = None
+
+    def render(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._camera is None:
+            from opend_mj.sim.camera import RGBDCamera
+
+            other = SceneReader._rendering
+            if other is not None and other is not self:
+                other.close()
+            self._camera = RGBDCamera(self.physics, "front", self.image_size, self.image_size)
+            SceneReader._rendering = self
+        return self._camera.render()
+
+    def privileged(self) -> dict:
+        lo, hi = self.probe.handle_box()
+        return {"handle_pos": (lo + hi) / 2, "handle_size": hi - lo,
+                "open_ratio": np.array([self.task.open_ratio(self.physics)])}
+
+    def close(self) -> None:
+        if self._camera is not None:
+            self._camera.close()
+            self._camera = None
+        if SceneReader._rendering is self:
+            SceneReader._rendering = None
+
+
+class ActionAdapter:
+    """Turns a normalised delta action into the task's own action (see the module doc)."""
+
+    def __init__(self, hand: str, task_config: TaskConfig):
+        import mujoco
+
+        self.spec = load_spec(hand)
+        model = mujoco.MjModel.from_xml_path(str(get_hand(hand).xml_path))
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in self.spec.actuator_names]
+        ranges = model.actuator_ctrlrange[ids]
+        self.finger_low, self.finger_high = ranges[:, 0].copy(), ranges[:, 1].copy()
+        self.n_fingers = len(ids)
+        self.step_pos = task_config.max_root_speed / task_config.control_hz
+        self.step_rot = task_config.max_root_angular_speed / task_config.control_hz
+
+    @property
+    def delta_dim(self) -> int:
+        return 6 + self.n_fingers
+
+    @property
+    def absolute_dim(self) -> int:
+        return 7 + self.n_fingers
+
+    def absolute_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        low = np.concatenate([ABSOLUTE_ROOT_LOW, -np.ones(4), self.finger_low])
+        high = np.concatenate([ABSOLUTE_ROOT_HIGH, np.ones(4), self.finger_high])
+        return low, high
+
+    def fingers_from_unit(self, unit) -> np.ndarray:
+        u = np.clip(np.asarray(unit, float), -1.0, 1.0)
+        return self.finger_low + (u + 1.0) * 0.5 * (self.finger_high - self.finger_low)
+
+    def fingers_to_unit(self, fingers) -> np.ndarray:
+        span = np.maximum(self.finger_high - self.finger_low, 1e-12)
+        return np.clip(2.0 * (np.asarray(fingers, float) - self.finger_low) / span - 1.0, -1.0, 1.0)
+
+    def from_delta(self, action, mocap_pos, mocap_quat) -> np.ndarray:
+        a = np.clip(np.asarray(action, float), -1.0, 1.0)
+        if a.shape != (self.delta_dim,):
+            raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
+        pos = np.asarray(mocap_pos, float) + a[:3] * self.step_pos
+        rotvec = a[3:6] * self.step_rot
+        angle = float(math.sqrt(rotvec @ rotvec))
+        quat = np.asarray(mocap_quat, float)
+        if angle > 1e-12:
+            quat = quat_mul(axis_angle_quat(rotvec / angle, angle), quat)
+            quat = quat / np.linalg.norm(quat)
+        return np.concatenate([pos, quat, self.fingers_from_unit(a[6:])])
+
+
+class OpenDCore:
+    """The engine of the environments over the dataset: sampling, scenes, observations, rewards."""
+
+    def __init__(self, config: EnvConfig):
+        self.config = config
+        self.sampler = EpisodeSampler(config)
+        self.task_config = config.task_config()
+        self.adapter = ActionAdapter(config.hand, self.task_config)
+        self.spec = self.adapter.spec
+        self._scenes: collections.OrderedDict[tuple, SceneReader] = collections.OrderedDict()
+        self.scene: SceneReader | None = None
+        self.episode: SampledEpisode | None = None
+        self._needs_reset = True
+        self.steps = 0
+        self.scenes_built = 0
+
+    @property
+    def control_dt(self) -> float:
+        return 1.0 / self.task_config.control_hz
+
+    # ------------------------------------------------------------------ scenes
+    def _scene(self, episode: SampledEpisode) -> SceneReader:
+        key = episode.scene_key
+        scene = self._scenes.get(key)
+        if scene is not None:
+            self._scenes.move_to_end(key)
+            return scene
+        while len(self._scenes) >= self.config.max_scenes:
+            _, old = self._scenes.popitem(last=False)
+            old.close()
+            old.env.close()
+        spec = EpisodeSpec(cabinet_dir=Path(episode.cabinet_dir), target_joint=episode.joint,
+                           hand=self.config.hand, seed=episode.scene_seed, room=episode.room)
+        task = StartPoseTask(spec, self.task_config)
+        env = OpenDEnvironment(task, time_limit=self.task_config.time_limit, random_state=episode.scene_seed,
+                               strip_singleton_obs_buffer_dim=True, raise_exception_on_physics_error=False)
+        scene = SceneReader(env, self.config.image_size)
+        self._scenes[key] = scene
+        self.scenes_built += 1
+        return scene
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: int, options: dict | None = None) -> tuple[dict, dict]:
+        episode = self.sampler.fixed(seed, options) if options else self.sampler.sample(seed)
+        scene = self._scene(episode)
+        task = scene.task
+        if task.target.joint != episode.joint or task.episode.instruction is not None:
+            task.set_target(episode.joint)
+        task.start_offset, task.start_yaw = episode.start_offset, episode.start_yaw
+        scene.env.reset()
+        scene.probe.start()
+        self.scene, self.episode = scene, episode
+        self._needs_reset = False
+        self.steps = 0
+        terms = scene.probe.terms()
+        dense_reward(terms, self.config.success_threshold, self.config.dense)  # fills reach / open / others
+        return self.observe(), self._info(terms)
+
+    def native_action(self, action) -> np.ndarray:
+        """The task's own action for ``action`` in this environment's control mode."""
+        if self.config.control == "absolute":
+            return np.asarray(action, dtype=np.float64)
+        d = self.scene._data
+        mid = self.scene._mocap
+        return self.adapter.from_delta(action, d.mocap_pos[mid], d.mocap_quat[mid])
+
+    def step(self, action) -> tuple[dict, float, bool, bool, dict]:
+        if self._needs_reset:
+            raise RuntimeError("the episode is over (or never started): call reset() first")
+        scene = self.scene
+        ts = scene.env.step(self.native_action(action))
+        self.steps += 1
+        warnings = list(scene.task.physics_warnings)
+        terms = scene.probe.terms()
+        if warnings:
+            reward, terminated, truncated = 0.0, True, False
+        else:
+            reward = self._reward(terms)
+            terminated = bool(terms.success and self.config.terminate_on_success)
+            truncated = bool(ts.last()) and not terminated
+        if terminated or truncated:
+            self._needs_reset = True
+        if self.config.reward_mode == "sparse":
+            dense_reward(terms, self.config.success_threshold, self.config.dense)
+        info = self._info(terms)
+        if warnings:
+            info["physics_warnings"] = warnings
+        return self.observe(), reward, terminated, truncated, info
+
+    def _reward(self, terms) -> float:
+        if self.config.reward_mode == "sparse":
+            return sparse_reward(terms)
+        return dense_reward(terms, self.config.success_threshold, self.config.dense)
+
+    def _info(self, terms) -> dict:
+        ep = self.episode
+        return {"success": bool(terms.success), "open_ratio": float(terms.open_ratio),
+                "others_moved": bool(terms.others_moved), "instruction": ep.instruction, "cabinet": ep.cabinet,
+                "target": ep.joint, "target_type": ep.target_type, "room": ep.room, "episode_seed": ep.seed,
+                "sim_time": float(self.scene._data.time), "reward_terms": terms.to_dict()}
+
+    def observe(self) -> dict:
+        """This environment's observation (float64 arrays; the gym wrapper casts them)."""
+        c, scene = self.config, self.scene
+        obs = scene.proprio()
+        obs["instruction"] = self.episode.instruction if c.instruction == "text" else instruction_onehot(
+            self.episode.instruction)
+        if c.obs_mode == "rgbd":
+            obs["rgb"], obs["depth"] = scene.render()
+            obs.update(scene.camera_arrays())
+        if c.privileged:
+            obs.update(scene.privileged())
+        return obs
+
+    def render(self) -> np.ndarray:
+        return self.scene.render()[0] if self.scene is not None else None
+
+    def close(self) -> None:
+        for scene in self._scenes.values():
+            scene.close()
+            scene.env.close()
+        self._scenes.clear()
+        self.scene = None
+
+    # ------------------------------------------------------------------ spaces (as plain shapes)
+    def observation_layout(self) -> dict[str, tuple[tuple[int, ...], str]]:
+        """key -> (shape, kind): kind is "float", "uint8" or "text"."""
+        n = self.adapter.n_fingers
+        size = self.config.image_size
+        layout = {"hand_qpos": ((n,), "float"), "hand_qvel": ((n,), "float"), "root_pos": ((3,), "float"),
+                  "root_quat": ((4,), "float"), "root_vel": ((6,), "float"), "grasp_site_pos": ((3,), "float"),
+                  "grasp_site_quat": ((4,), "float"), "mocap_pos": ((3,), "float"), "mocap_quat": ((4,), "float"),
+                  "time": ((1,), "float")}
+        layout["instruction"] = ((), "text") if self.config.instruction == "text" else ((INSTRUCTION_DIM,), "float")
+        if self.config.obs_mode == "rgbd":
+            layout.update({"rgb": ((size, size, 3), "uint8"), "depth": ((size, size), "float"),
+                           "camera_K": ((3, 3), "float"), "camera_pose": ((4, 4), "float")})
+        if self.config.privileged:
+            layout.update({"handle_pos": ((3,), "float"), "handle_size": ((3,), "float"),
+                           "open_ratio": ((1,), "float")})
+        return layout
+
+    def action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.config.control == "absolute":
+            return self.adapter.absolute_bounds()
+        return -np.ones(self.adapter.delta_dim), np.ones(self.adapter.delta_dim)
+
+    def action_names(self) -> list[str]:
+        fingers = list(self.spec.actuator_names)
+        if self.config.control == "absolute":
+            return ["root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz"] + fingers
+        return ["d_root_x", "d_root_y", "d_root_z", "rot_x", "rot_y", "rot_z"] + fingers
+
+
+def make_config(**kwargs) -> EnvConfig:
+    """An `EnvConfig` from keyword arguments (lists become tuples; cabinets may be a Path)."""
+    for key in ("cabinet_ids", "target_types"):
+        if key in kwargs and kwargs[key] is not None and not isinstance(kwargs[key], tuple):
+            value = kwargs[key]
+            kwargs[key] = (value,) if isinstance(value, str) else tuple(value)
+    if "cabinets" in kwargs:
+        kwargs["cabinets"] = str(kwargs["cabinets"])
+    return EnvConfig(**kwargs)
+
+
+class OpenDDmEnv(dm_env.Environment):
+    """The same environment through the dm_env API (for dm_control / Acme users).
+
+    ``reset()`` starts the next episode of a seeded sequence (episode k uses a seed drawn from
+    ``seed``); ``reset_with_seed(s)`` starts the episode of seed ``s`` (the gymnasium environment's
+    ``reset(seed=s)``). Observations, actions, rewards and ``info`` (``env.info``) are the gymnasium
+    environment's; the last step of an episode has discount 0 when it terminated (success or a
+    physics failure) and 1 when the time ran out.
+    """
+
+    def __init__(self, seed: int = 0, **kwargs):
+        self.core = OpenDCore(make_config(**kwargs))
+        self._seeds = np.random.default_rng(seed)
+        self._done = True
+        self.info: dict = {}
+
+    def reset(self) -> dm_env.TimeStep:
+        return self.reset_with_seed(int(self._seeds.integers(2**31 - 1)))
+
+    def reset_with_seed(self, seed: int, options: dict | None = None) -> dm_env.TimeStep:
+        obs, self.info = self.core.reset(seed, options)
+        self._done = False
+        return dm_env.restart(obs)
+
+    def step(self, action) -> dm_env.TimeStep:
+        if self._done:
+            return self.reset()
+        obs, reward, terminated, truncated, self.info = self.core.step(action)
+        if terminated:
+            self._done = True
+            return dm_env.termination(reward, obs)
+        if truncated:
+            self._done = True
+            return dm_env.truncation(reward, obs)
+        return dm_env.transition(reward, obs)
+
+    def observation_spec(self):
+        out = {}
+        for key, (shape, kind) in self.core.observation_layout().items():
+            if kind == "text":
+                out[key] = specs.StringArray(shape=shape, name=key)
+            else:
+                out[key] = specs.Array(shape=shape, dtype=np.uint8 if kind == "uint8" else np.float64, name=key)
+        return out
+
+    def action_spec(self):
+        low, high = self.core.action_bounds()
+        return specs.BoundedArray(shape=low.shape, dtype=np.float64, minimum=low, maximum=high,
+                                  name="\t".join(self.core.action_names()))
+
+    def close(self) -> None:
+        self.core.close()

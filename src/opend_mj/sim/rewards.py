@@ -1,0 +1,161 @@
+"""Rewards for learning agents: the benchmark's sparse success and a dense shaping in [0, 1].
+
+The benchmark itself scores only the final state (`sim.task.SuccessChecker`: the instructed target's
+open ratio above 20 %). RL from scratch needs a signal before the target moves, so the environments
+(`sim.envs`, `sim.gym_env`) also offer a dense reward built from four terms, each in [0, 1]:
+
+* ``reach``: progress of the grasp site toward the instructed handle, relative to where the episode
+  started: ``(d0 - d - dead_zone) / (d0 - dead_zone)`` clipped to [0, 1], where ``d`` is the
+  distance from the grasp site to the handle's box (0 inside it) and ``d0`` that distance at reset.
+  The dead zone (2 cm) keeps a hand that settles on its weld at 0.
+* ``contact``: 1 while any geom of the hand touches a handle geom of the instructed target.
+* ``open``: ``(open_ratio - 0.005) / (threshold - 0.005)`` clipped to [0, 1]: 1 at the success
+  threshold (the 0.5 % dead zone ignores a closed target resting against its stop).
+* ``others``: the largest fraction of its range that any *other* target opened, divided by 0.1 and
+  clipped to [0, 1] (a penalty: 1 when another door or drawer opened 10 % of its range).
+
+``dense = (1 * reach + 1 * contact + 2 * open) / 4 * (1 - 0.5 * others)``, and 1 on success with no
+other target moved. As in ManiSkill3's normalised dense reward, every step's reward lies in [0, 1];
+a hand that never moves gets 0 on every step. ``sparse`` is 1 on a success step, else 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+REWARD_MODES = ("dense", "sparse")
+
+
+@dataclass(frozen=True)
+class DenseRewardConfig:
+    """Weights and dead zones of the dense reward (see the module doc)."""
+
+    reach_weight: float = 1.0
+    contact_weight: float = 1.0
+    open_weight: float = 2.0
+    reach_dead_zone: float = 0.02  # m
+    open_dead_zone: float = 0.005  # open ratio
+    #: range ratio of another target at which the penalty is full
+    others_full: float = 0.1
+    #: fraction of the reward taken away at full penalty
+    others_penalty: float = 0.5
+
+
+@dataclass
+class RewardTerms:
+    """What the dense reward is computed from (also handed out in ``info["reward_terms"]``)."""
+
+    distance: float  # grasp site to the instructed handle's box (m)
+    start_distance: float  # the same at reset
+    contact: bool
+    open_ratio: float
+    others_range: float  # largest range ratio among the other targets
+    success: bool
+    others_moved: bool
+    reach: float = 0.0
+    open: float = 0.0
+    others: float = 0.0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def dense_reward(terms: RewardTerms, threshold: float, config: DenseRewardConfig = DenseRewardConfig()) -> float:
+    """The dense reward in [0, 1]; fills ``terms.reach``, ``terms.open`` and ``terms.others``."""
+    c = config
+    span = terms.start_distance - c.reach_dead_zone
+    if span > 1e-9:
+        terms.reach = float(np.clip((terms.start_distance - terms.distance - c.reach_dead_zone) / span, 0.0, 1.0))
+    else:  # started at the handle already
+        terms.reach = 1.0 if terms.distance <= c.reach_dead_zone else 0.0
+    terms.open = float(np.clip((terms.open_ratio - c.open_dead_zone) / max(threshold - c.open_dead_zone, 1e-9),
+                               0.0, 1.0))
+    terms.others = float(np.clip(terms.others_range / c.others_full, 0.0, 1.0))
+    if terms.success and not terms.others_moved:
+        return 1.0
+    total = c.reach_weight + c.contact_weight + c.open_weight
+    base = (c.reach_weight * terms.reach + c.contact_weight * float(terms.contact) + c.open_weight * terms.open) / total
+    return float(np.clip(base * (1.0 - c.others_penalty * terms.others), 0.0, 1.0))
+
+
+def sparse_reward(terms: RewardTerms) -> float:
+    return 1.0 if terms.success else 0.0
+
+
+class RewardProbe:
+    """Reads the reward terms from a task's physics (ground truth: for rewards and labels only).
+
+    Built per compiled scene; indices are cached per model and per target joint.
+    """
+
+    def __init__(self, task, physics):
+        model = physics.model.ptr
+        self.task = task
+        self._model = model
+        self._data = physics.data.ptr
+        root = physics.model.name2id(task.hand.root_body.full_identifier, "body")
+        hand_bodies = np.flatnonzero(model.body_rootid == model.body_rootid[root])
+        self._hand_geoms = np.flatnonzero(np.isin(model.geom_bodyid, hand_bodies))
+        self._site = physics.model.name2id(task.hand.grasp_site.full_identifier, "site")
+        self._handles: dict[str, np.ndarray] = {}
+        self._qpos: dict[str, int] = {t.joint: int(physics.bind(task.cabinet.joint_element(t.joint)).qposadr)
+                                      for t in task.cabinet.targets}
+        self.start_distance = 0.0
+
+    def handle_geoms(self, joint: str) -> np.ndarray:
+        ids = self._handles.get(joint)
+        if ids is None:
+            import mujoco
+
+            target = self.task.cabinet.target(joint)
+            ids = np.array([mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_GEOM, f"cabinet/{g}")
+                            for g in target.handle_geoms], dtype=int)
+            self._handles[joint] = ids = ids[ids >= 0]
+        return ids
+
+    def handle_box(self, joint: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """World axis-aligned box (min, max) around the target's handle geoms, as they are now."""
+        joint = joint or self.task.target.joint
+        model, data = self._model, self._data
+        corners = []
+        for gid in self.handle_geoms(joint):
+            aabb = model.geom_aabb[gid]
+            local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * aabb[3:] + aabb[:3]
+            corners.append(local @ data.geom_xmat[gid].reshape(3, 3).T + data.geom_xpos[gid])
+        if not corners:  # a target without handle geoms: its closed handle box (cabinet at the origin)
+            lo, hi = self.task.cabinet.target(joint).handle_box
+            return np.asarray(lo, float), np.asarray(hi, float)
+        pts = np.vstack(corners)
+        return pts.min(axis=0), pts.max(axis=0)
+
+    def distance(self) -> float:
+        lo, hi = self.handle_box()
+        site = self._data.site_xpos[self._site]
+        outside = np.maximum(0.0, np.maximum(lo - site, site - hi))
+        return float(np.sqrt(outside @ outside))
+
+    def contact(self) -> bool:
+        data = self._data
+        n = int(data.ncon)
+        if n == 0:
+            return False
+        handles = self.handle_geoms(self.task.target.joint)
+        g1, g2 = data.contact.geom1[:n], data.contact.geom2[:n]
+        hand1, hand2 = np.isin(g1, self._hand_geoms), np.isin(g2, self._hand_geoms)
+        return bool(np.any((hand1 & np.isin(g2, handles)) | (hand2 & np.isin(g1, handles))))
+
+    def start(self) -> None:
+        """Call at reset (after the hand is placed): remembers the starting distance."""
+        self.start_distance = self.distance()
+
+    def terms(self) -> RewardTerms:
+        task, qpos = self.task, self._data.qpos
+        target = task.target
+        values = {j: float(qpos[a]) for j, a in self._qpos.items()}
+        outcome = task.checker.check_values(values)
+        others = [t.range_ratio(values[t.joint]) for t in task.cabinet.targets if t.joint != target.joint]
+        return RewardTerms(distance=self.distance(), start_distance=self.start_distance, contact=self.contact(),
+                           open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
+                           success=bool(outcome.success), others_moved=bool(outcome.others_moved))
