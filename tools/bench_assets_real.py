@@ -205,6 +205,18 @@ def summary(ids: list[str], out: Path, source: Path) -> str:
                 if v:
                     lines.append(f"| {cls + ' ' + label:<40} | {statistics.median(v):.2f} | "
                                  f"{_pct(v, 90):.2f} | {max(v):.2f} |")
+        lines += ["", "| front rays (+x, first hit, collision vs visual) | rays | median mm | p99 mm (median / max over cabinets) | within 1 mm | within 2 mm |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for cls, label in (("handle", "handles"), ("front", "door and drawer fronts"), ("carcass", "carcass (openings)")):
+            rows = [r["fidelity"]["front_rays"][cls] for r in fid if r["fidelity"].get("front_rays", {}).get(cls, {}).get("rays")]
+            if not rows:
+                continue
+            n = sum(x["rays"] for x in rows)
+            w1 = sum(x["within_1mm"] * x["rays"] for x in rows) / n
+            w2 = sum(x["within_2mm"] * x["rays"] for x in rows) / n
+            p50 = statistics.median(x["p50"] for x in rows) * 1000
+            p99 = [x["p99"] * 1000 for x in rows]
+            lines.append(f"| {label} | {n} | {p50:.2f} | {statistics.median(p99):.2f} / {max(p99):.1f} | {w1:.1%} | {w2:.1%} |")
         within = [r for r in fid if r["fidelity"]["handle"]["max"] <= 0.001]
         lines.append(f"\nhandles within 1 mm (both directions, max): {len(within)} of {len(fid)} cabinets; "
                      f"rest within 2 mm: {sum(r['fidelity']['rest']['max'] <= 0.002 for r in fid)} of {len(fid)}")
