@@ -50,12 +50,18 @@ def _record_path(out: Path, cid: str) -> Path:
 
 
 def _load(out: Path, cid: str) -> dict:
+    """A cabinet's record; the fidelity phase keeps its own file (it may run beside the others)."""
     p = _record_path(out, cid)
-    return json.loads(p.read_text()) if p.is_file() else {"id": cid}
+    rec = json.loads(p.read_text()) if p.is_file() else {"id": cid}
+    f = p.with_suffix(".fidelity.json")
+    if f.is_file():
+        rec["fidelity"] = json.loads(f.read_text())
+    return rec
 
 
-def _save(out: Path, rec: dict) -> None:
-    p = _record_path(out, rec["id"])
+def _save(out: Path, rec: dict, suffix: str = ".json") -> None:
+    rec = {k: v for k, v in rec.items() if k != "fidelity"} if suffix == ".json" else rec
+    p = _record_path(out, rec["id"]).with_suffix(suffix) if suffix != ".json" else _record_path(out, rec["id"])
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_suffix(".tmp")
     tmp.write_text(json.dumps(rec, indent=1, default=float))
@@ -138,7 +144,7 @@ def phase_fidelity(sources: list[Path], out: Path, cabinets: Path) -> None:
             rec["fidelity"] = cabinet_fidelity(src, cabinets / src.name, CompilerConfig())
         except Exception as exc:  # noqa: BLE001
             rec["fidelity"] = {"error": f"{type(exc).__name__}: {exc}"}
-        _save(out, rec)
+        _save(out, {"id": src.name, **rec["fidelity"]}, suffix=".fidelity.json")
         f = rec["fidelity"]
         if "error" in f:
             print(f"[{k + 1}/{len(sources)}] fidelity {src.name}: ERROR {f['error']}", flush=True)

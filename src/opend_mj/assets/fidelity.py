@@ -7,7 +7,7 @@ at 0) and the compiled `cabinet.xml` (MuJoCo, at qpos0, i.e. the same pose) and 
 - visual -> collision: distance from a visual surface point to the union of the part's collision
   geoms of that class (0 inside a geom): where the collision geometry misses the surface;
 - collision -> visual: distance from a point on the boundary of that union (points inside another
-  geom of the same part are not on the boundary) to the visual surface of the class: where the
+  geom of the same part, or on a face it shares with one, are not on the boundary) to the visual surface of the class: where the
   collision geometry stands off the surface (thickened plates, hulls bridging a concavity);
 
 the same from the front, as a finger or a camera meets the surface: rays along +x over each part's
@@ -51,15 +51,15 @@ def _geom_mesh(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> trimesh.Tr
     return trimesh.convex.convex_hull(world)
 
 
-def _inside_any(points: np.ndarray, hulls: list[trimesh.Trimesh], skip: int = -1, margin: float = 1e-6) -> np.ndarray:
-    """Points strictly inside at least one hull (by more than `margin`), hull `skip` left out."""
+def _inside_any(points: np.ndarray, hulls: list[trimesh.Trimesh], skip: int = -1, tol: float = 0.0) -> np.ndarray:
+    """Points inside at least one hull or within `tol` outside its faces, hull `skip` left out."""
     inside = np.zeros(len(points), dtype=bool)
     for k, h in enumerate(hulls):
         if k == skip or not len(points):
             continue
         normals = np.asarray(h.face_normals)
         offsets = np.einsum("ij,ij->i", normals, np.asarray(h.triangles_center))
-        inside |= (points @ normals.T - offsets).max(axis=1) < -margin
+        inside |= (points @ normals.T - offsets).max(axis=1) < tol
     return inside
 
 
@@ -196,7 +196,8 @@ def cabinet_fidelity(source_dir: Path, cabinet_dir: Path, config: CompilerConfig
             boundary = []
             for k, h in enumerate(hulls):
                 hp = _sample(h, max(20, int(len(pts) * 0.5 * h.area / max(vis.area, 1e-12))), rng)
-                boundary.append(hp[~_inside_any(hp, hulls, skip=k)])
+                # points on a face shared with a neighbour (a cut plane) are inside the union too
+                boundary.append(hp[~_inside_any(hp, hulls, skip=k, tol=2e-5)])
             per_class[cls]["c2v"].append(_distance(np.vstack(boundary), vis))
 
     result: dict = {}
