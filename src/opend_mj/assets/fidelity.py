@@ -10,12 +10,11 @@ at 0) and the compiled `cabinet.xml` (MuJoCo, at qpos0, i.e. the same pose) and 
   geom of the same part, or on a face it shares with one, are not on the boundary) to the visual surface of the class: where the
   collision geometry stands off the surface (thickened plates, hulls bridging a concavity);
 
-the same from the front, as a finger or a camera meets the surface: rays along +x over each part's
-footprint (1 cm apart, 50 x 50 at most; 2 mm over a handle), first hit on the part's visual meshes vs first hit on its collision geoms, per
-class of the surface the visual ray meets (handle, door/drawer front, carcass; a carcass opening
-whose collision ray stops short shows here): median, p99 and the share of rays within 1 / 2 mm
-(rays that graze an edge, where one surface is hit and the other is not or far behind, count as
-outside);
+the same from the front, where a finger or a camera meets the surface: rays along +x over each part's
+footprint (1 cm apart, 50 x 50 at most; 2 mm apart over a handle); per ray, the larger of the distance
+from the first collision hit to the visual surface and from the first visual hit to the collision
+geoms, by the class of the visual surface hit (handle, door/drawer front, carcass: a hull closing a
+carcass opening shows here); median, p99 and the share of rays within 1 / 2 mm;
 
 and, per part with a handle, the bar-to-panel gap: rays along +x (into the cabinet, whose front faces
 -x) over the handle's footprint; on each ray the free distance between the back of the handle and the
@@ -138,11 +137,14 @@ def _first_hits(mesh: trimesh.Trimesh | None, origins: np.ndarray) -> tuple[np.n
     return x, tri
 
 
-def _front_rays(vis_parts: list[tuple[trimesh.Trimesh, int]], col: trimesh.Trimesh | None, spacing: float,
+def _front_rays(vis_parts: tuple[trimesh.Trimesh, int], hulls: list[trimesh.Trimesh], spacing: float,
                 max_rays: int = 50, box=None) -> dict[str, np.ndarray]:
-    """Front-ray deviations of one part: `vis_parts` is (visual mesh, handle faces count first); rays
-    over `box` (default the mesh's bounds)."""
+    """Front-ray deviations of one part: `vis_parts` is (visual mesh, number of handle faces, which come
+    first); rays over `box` (default the mesh's bounds). Per ray: the larger of the distance from the
+    collision hit to the visual surface and from the visual hit to the collision geoms (0 inside one), so
+    that a ray grazing a thickened plate counts the thickening, not the depth behind the plate."""
     vis, n_handle = vis_parts
+    col = _concat(hulls)
     lo, hi = vis.bounds if box is None else box
     ny = int(np.clip((hi[1] - lo[1]) / spacing, 1, max_rays))
     nz = int(np.clip((hi[2] - lo[2]) / spacing, 1, max_rays))
@@ -152,7 +154,20 @@ def _front_rays(vis_parts: list[tuple[trimesh.Trimesh, int]], col: trimesh.Trime
     xv, tv = _first_hits(vis, origins)
     xc, _ = _first_hits(col, origins)
     seen = np.isfinite(xv)
-    dev = np.abs(np.where(np.isfinite(xc), xc, np.inf) - xv)[seen]
+    dev = np.zeros(len(origins))
+    hv = seen.copy()
+    if col is None:
+        dev[hv] = np.inf
+    elif hv.any():
+        pv = origins[hv] + np.outer(xv[hv] - origins[hv, 0], [1.0, 0.0, 0.0])
+        d = _distance(pv, col)
+        d[_inside_any(pv, hulls)] = 0.0
+        dev[hv] = d
+    hc = seen & np.isfinite(xc)
+    if hc.any():
+        pc = origins[hc] + np.outer(xc[hc] - origins[hc, 0], [1.0, 0.0, 0.0])
+        dev[hc] = np.maximum(dev[hc], _distance(pc, vis))
+    dev = dev[seen]
     is_handle = (tv[seen] < n_handle)
     return {"handle": dev[is_handle], "rest": dev[~is_handle]}
 
@@ -223,12 +238,12 @@ def cabinet_fidelity(source_dir: Path, cabinet_dir: Path, config: CompilerConfig
         if vis is None:
             continue
         n_handle = int(sum(len(v.faces) for v in handles))
-        col = _concat(collisions[(part.name, "handle")] + collisions[(part.name, "rest")])
-        dev = _front_rays((vis, n_handle), col, front_spacing)
+        hulls = collisions[(part.name, "handle")] + collisions[(part.name, "rest")]
+        dev = _front_rays((vis, n_handle), hulls, front_spacing)
         front["handle"].append(dev["handle"])
         if handles:  # a finer grid over the handles' own footprint
             hb = _visual_mesh(handles).bounds
-            front["handle"].append(_front_rays((vis, n_handle), col, 0.002, box=hb, max_rays=40)["handle"])
+            front["handle"].append(_front_rays((vis, n_handle), hulls, 0.002, box=hb, max_rays=40)["handle"])
         front["carcass" if part.joint is None else "front"].append(dev["rest"])
     result["front_rays"] = {}
     for cls, devs in front.items():
