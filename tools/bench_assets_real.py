@@ -223,6 +223,13 @@ def summary(ids: list[str], out: Path, source: Path) -> str:
                 if v:
                     lines.append(f"| {cls + ' ' + label:<40} | {statistics.median(v):.2f} | "
                                  f"{_pct(v, 90):.2f} | {max(v):.2f} |")
+        lines += ["", "(visual -> collision: how much visual surface the collision geometry misses; collision -> "
+                  "visual: how far the boundary of the collision geometry stands off the visual surface, which "
+                  "counts the faces that filling a board adds where PartNet leaves it open, hulls bridging a "
+                  "relief or a curve where the hull budget ran out, and the 4 mm thickening of flat plates. "
+                  "The front rays measure what a finger or the camera meets: per ray, the larger of the "
+                  "distances between the collision hit and the visual surface and between the visual hit and "
+                  "the collision geometry.)"]
         lines += ["", "| front rays (+x, first hit, collision vs visual) | rays | median mm | p99 mm (median / max over cabinets) | within 1 mm | within 2 mm |",
                   "|---|---:|---:|---:|---:|---:|"]
         for cls, label in (("handle", "handles"), ("front", "door and drawer fronts"), ("carcass", "carcass (openings)")):
