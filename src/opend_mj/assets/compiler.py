@@ -217,6 +217,8 @@ class _MjcfWriter:
         if part.joint is not None:
             j = part.joint
             physics = c.drawer if j.kind == "slide" else c.door
+            if c.counterbalance and _gravity_loaded(j):
+                body.set("gravcomp", "1")
             ET.SubElement(body, "joint", name=j.name, type=j.kind, axis=_fmt(j.axis), pos="0 0 0",
                           range=_fmt([j.lower, j.upper]), limited="true",
                           damping=f"{physics.damping:g}", frictionloss=f"{physics.frictionloss:g}",
@@ -310,6 +312,12 @@ class _MjcfWriter:
                 attrs["rgba"] = _fmt(key[1], 4)
             ET.SubElement(body, "geom", attrs)
             self.counts["visual_meshes"] += 1
+
+
+def _gravity_loaded(joint) -> bool:
+    """Whether gravity moves this joint: a hinge whose axis is not vertical, a slide that is not level."""
+    vertical = abs(float(np.asarray(joint.axis, dtype=float)[2]))
+    return vertical < 0.99 if joint.kind == "hinge" else vertical > 0.01
 
 
 def _write_xml(root: ET.Element, path: Path) -> None:

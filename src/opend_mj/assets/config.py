@@ -79,6 +79,10 @@ class CompilerConfig:
     #: Mesh files with more faces than this are rejected (they would stall a worker).
     max_mesh_faces: int = 200000
     coacd: CoacdParams = CoacdParams()
+    #: Doors on a non-vertical hinge (flaps, lift-up doors) and vertical sliders are counterbalanced
+    #: (MuJoCo gravcomp on their body, as a gas strut or a stay holds a real one): otherwise a flap falls
+    #: open under gravity and a lift-up door cannot be held open.
+    counterbalance: bool = True
     #: Friction of cabinet and handle geoms (sliding, torsional, rolling).
     friction: tuple[float, float, float] = (1.0, 0.01, 0.0001)
     handle_condim: int = 4
