@@ -354,3 +354,23 @@ def test_real_cabinet_fidelity(real_cabinet):
     assert len(f["bar_gaps"]) == 2
     for gap in f["bar_gaps"]:
         assert gap["visual"] > 0.02 and gap["collision"] > gap["visual"] - 0.001
+
+
+def test_gravity_loaded_joints_are_counterbalanced():
+    """Flaps (non-vertical hinges) and vertical sliders get gravcomp; ordinary doors and drawers do not."""
+    from types import SimpleNamespace
+
+    from opend_mj.assets.compiler import _gravity_loaded
+
+    def joint(kind, axis):
+        return SimpleNamespace(kind=kind, axis=np.array(axis, dtype=float))
+
+    assert not _gravity_loaded(joint("hinge", [0, 0, 1])) and not _gravity_loaded(joint("hinge", [0, 0, -1]))
+    assert _gravity_loaded(joint("hinge", [0, -1, 0]))
+    assert not _gravity_loaded(joint("slide", [-1, 0, 0]))
+    assert _gravity_loaded(joint("slide", [0, 0, 1]))
+
+
+def test_procedural_cabinets_need_no_counterbalance(proc_cabinets):
+    for c in proc_cabinets:
+        assert "gravcomp" not in c.xml.read_text()
