@@ -177,3 +177,83 @@ def test_lone_triangle_visual_is_fine(good_sources, tmp_path):
     result = compile_cabinet(src, tmp_path / "out")
     assert result.status == "built", result.message
     mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "cab" / "cabinet.xml"))
+
+
+def _set_mesh_path(src: Path, new: str) -> Path:
+    text = _urdf(src).read_text()
+    _urdf(src).write_text(text.replace('filename="textured_objs/original-0.obj"', f'filename="{new}"'))
+    return _urdf(src)
+
+
+def mesh_path_escapes(src: Path) -> Path:
+    return _set_mesh_path(src, "../../somewhere/x.obj")
+
+
+def mesh_path_absolute(src: Path) -> Path:
+    return _set_mesh_path(src, "/etc/hostname")
+
+
+def duplicate_joint(src: Path) -> Path:
+    text = _urdf(src).read_text()
+    names = re.findall(r'<joint name="([^"]+)"', text)
+    _urdf(src).write_text(text.replace(f'<joint name="{names[1]}"', f'<joint name="{names[0]}"', 1))
+    return _urdf(src)
+
+
+def duplicate_link(src: Path) -> Path:
+    text = _urdf(src).read_text()
+    _urdf(src).write_text(text.replace("</robot>", '<link name="base"/>\n</robot>'))
+    return _urdf(src)
+
+
+def huge_mesh(src: Path) -> Path:
+    path = _obj(src, 0)
+    verts = "".join(f"v {i * 1e-3} {(i % 7) * 1e-3} {(i % 3) * 1e-3}\n" for i in range(300))
+    faces = "f 1 2 3\n" * 250
+    path.write_text(verts + faces)
+    return path
+
+
+SAFETY_CASES = {
+    "mesh_path_escapes": (mesh_path_escapes, "mesh_error", r"leaves the source folder"),
+    "mesh_path_absolute": (mesh_path_absolute, "mesh_error", r"leaves the source folder"),
+    "duplicate_joint": (duplicate_joint, "urdf_error", r"duplicate joint"),
+    "duplicate_link": (duplicate_link, "urdf_error", r"duplicate link"),
+    "huge_mesh": (huge_mesh, "mesh_error", r"more than the limit"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SAFETY_CASES))
+def test_unsafe_or_huge_source_is_rejected_in_one_line(name, good_sources, tmp_path, monkeypatch):
+    import dataclasses
+
+    from opend_mj.assets.config import CompilerConfig
+
+    src = Path(shutil.copytree(good_sources[0], tmp_path / "src" / name))
+    broken_file = SAFETY_CASES[name][0](src)
+    _, reason, problem = SAFETY_CASES[name]
+    opened = []
+    if name.startswith("mesh_path"):
+        from opend_mj.assets import sources
+
+        real = sources.load_mesh_file
+        monkeypatch.setattr(sources, "load_mesh_file", lambda p, *a: opened.append(p) or real(p, *a))
+    config = dataclasses.replace(CompilerConfig(), max_mesh_faces=200)
+    result = compile_cabinet(src, tmp_path / "out", config, cache_dir=tmp_path / "cache")
+    assert (result.status, result.reason) == ("rejected", reason), result.message
+    assert str(broken_file) in result.message
+    assert re.search(problem, result.message, re.IGNORECASE), result.message
+    assert "\n" not in result.message
+    assert not any("somewhere" in str(p) or str(p).startswith("/etc") for p in opened), "refused, not read"
+
+
+def test_dataset_goes_on_after_unsafe_sources(good_sources, tmp_path):
+    broken = []
+    for name in ("mesh_path_escapes", "duplicate_joint"):
+        src = Path(shutil.copytree(good_sources[0], tmp_path / "broken" / name))
+        SAFETY_CASES[name][0](src)
+        broken.append(src)
+    manifest = build_dataset([good_sources[0], *broken], tmp_path / "out", workers=1, progress=False,
+                             log=lambda *a: None, cache_dir=tmp_path / "cache")
+    assert [c["id"] for c in manifest.cabinets] == [good_sources[0].name]
+    assert sorted(r["id"] for r in manifest.rejected) == ["duplicate_joint", "mesh_path_escapes"]

@@ -189,3 +189,26 @@ def test_cli_rejects_a_missing_source_folder(tmp_path):
                                        str(tmp_path / "out"), "--no-progress"])
     assert result.exit_code == 2
     assert "does not exist" in result.output
+
+
+def test_cli_cache_dir_reaches_the_build(tmp_path, monkeypatch):
+    """`--cache-dir` is the decomposition cache the build uses (default: the user cache dir)."""
+    import opend_mj.assets.dataset as dataset
+
+    seen = []
+    real = dataset.build_dataset
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("cache_dir"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(dataset, "build_dataset", spy)
+    cache = tmp_path / "decompositions"
+    result = CliRunner().invoke(main, ["build-assets", "--count", "2", "--out", str(tmp_path / "out"),
+                                       "--workers", "1", "--no-progress", "--cache-dir", str(cache)])
+    assert result.exit_code == 0, result.output
+    assert seen == [cache]
+    result = CliRunner().invoke(main, ["build-assets", "--count", "2", "--out", str(tmp_path / "out2"),
+                                       "--workers", "1", "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert seen[1] is None

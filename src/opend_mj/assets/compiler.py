@@ -45,7 +45,7 @@ from opend_mj.language import LanguageConfig, LanguageInvalid, TargetLayout, des
 from opend_mj.transforms import mat_to_quat
 
 #: Bump when the compiler's output changes for the same input and config (invalidates the cache).
-COMPILER_VERSION = 2
+COMPILER_VERSION = 3
 
 
 @dataclass
@@ -58,6 +58,17 @@ class CompileResult:
     message: str | None = None
     seconds: float = 0.0
     info: dict = field(default_factory=dict)  # the cabinet.json content when built or cached
+
+
+def default_cache_dir() -> Path:
+    """Where decompositions are cached across output folders: $OPEND_CACHE_DIR, else
+    $XDG_CACHE_HOME/opend-mj, else ~/.cache/opend-mj."""
+    import os
+
+    if os.environ.get("OPEND_CACHE_DIR"):
+        return Path(os.environ["OPEND_CACHE_DIR"]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base).expanduser() / "opend-mj"
 
 
 def _fmt(values, precision: int = 6) -> str:
@@ -142,6 +153,7 @@ class _MjcfWriter:
         self.config = config
         self.cache_dir = cache_dir
         self.stats = DecompositionStats()
+        self._memo: dict = {}  # decompositions of this cabinet by piece shape (copies of one part)
         self.counts = {"hulls": 0, "boxes": 0, "mesh_hulls": 0, "visual_meshes": 0, "textures": 0}
         self.root = ET.Element("mujoco", model=f"cabinet_{source.id}")
         ET.SubElement(self.root, "compiler", angle="radian")
@@ -190,7 +202,7 @@ class _MjcfWriter:
         c = self.config
         origin = self._origin(part)
         body_hulls = self._hulls([v for v in part.visuals if not v.is_handle], origin)
-        handle_hulls = self._hulls(part.handles, origin)
+        handle_hulls = self._hulls(part.handles, origin, handle=True)
         all_hulls = body_hulls + handle_hulls
         mass, com, inertia = mass_properties(all_hulls, c.density)
         if part.joint is not None:
@@ -205,6 +217,8 @@ class _MjcfWriter:
         if part.joint is not None:
             j = part.joint
             physics = c.drawer if j.kind == "slide" else c.door
+            if c.counterbalance and _gravity_loaded(j):
+                body.set("gravcomp", "1")
             ET.SubElement(body, "joint", name=j.name, type=j.kind, axis=_fmt(j.axis), pos="0 0 0",
                           range=_fmt([j.lower, j.upper]), limited="true",
                           damping=f"{physics.damping:g}", frictionloss=f"{physics.frictionloss:g}",
@@ -218,15 +232,18 @@ class _MjcfWriter:
         if names:
             self.handle_geoms[part.name] = names
 
-    def _hulls(self, visuals, origin: np.ndarray) -> list[Hull]:
+    def _hulls(self, visuals, origin: np.ndarray, handle: bool = False) -> list[Hull]:
         if not visuals:
             return []
-        verts, faces, offset = [], [], 0
+        verts, faces, groups, offset = [], [], [], 0
+        files = {}
         for v in visuals:
             verts.append(v.vertices - origin)
             faces.append(v.faces + offset)
+            groups.append(np.full(len(v.faces), files.setdefault(v.file, len(files))))
             offset += len(v.vertices)
-        return collision_hulls(np.vstack(verts), np.vstack(faces), self.config, self.cache_dir, self.stats)
+        return collision_hulls(np.vstack(verts), np.vstack(faces), self.config, self.cache_dir, self.stats,
+                               groups=np.concatenate(groups), handle=handle, memo=self._memo)
 
     def _geom(self, body: ET.Element, hull: Hull, name: str, cls: str) -> None:
         p = self.config.precision
@@ -297,6 +314,12 @@ class _MjcfWriter:
             self.counts["visual_meshes"] += 1
 
 
+def _gravity_loaded(joint) -> bool:
+    """Whether gravity moves this joint: a hinge whose axis is not vertical, a slide that is not level."""
+    vertical = abs(float(np.asarray(joint.axis, dtype=float)[2]))
+    return vertical < 0.99 if joint.kind == "hinge" else vertical > 0.01
+
+
 def _write_xml(root: ET.Element, path: Path) -> None:
     ET.indent(root, space="  ")
     path.write_text(ET.tostring(root, encoding="unicode") + "\n")
@@ -339,6 +362,7 @@ def compile_cabinet(
     def rejected(reason: str, message: str) -> CompileResult:
         if out_dir.exists():
             shutil.rmtree(out_dir, ignore_errors=True)
+        message = " ".join(str(message).split())  # one line, whatever the underlying error printed
         return CompileResult(cabinet_id, "rejected", reason, message, time.perf_counter() - start)
 
     try:
@@ -356,7 +380,7 @@ def compile_cabinet(
             pass
 
     try:
-        source = read_source(source_dir, config.scale)
+        source = read_source(source_dir, config.scale, config.max_mesh_faces)
     except SourceError as exc:
         return rejected(exc.kind, str(exc))
     records = _target_records(source)
@@ -370,7 +394,7 @@ def compile_cabinet(
     if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
-    writer = _MjcfWriter(source, out_dir, config, cache_dir or (Path(out_root) / ".cache"))
+    writer = _MjcfWriter(source, out_dir, config, cache_dir or default_cache_dir())
     try:
         root = writer.write()
     except Exception as exc:  # decomposition on a broken mesh, qhull failures
@@ -410,6 +434,10 @@ def compile_cabinet(
             "decomposed_pieces": writer.stats.decomposed_pieces,
             "coacd_hulls": writer.stats.coacd_hulls,
             "dropped_pieces": writer.stats.dropped_pieces,
+            "split_hulls": writer.stats.split_hulls,
+            "split_cache_hits": writer.stats.cache_hits,
+            "split_seconds": round(writer.stats.split_seconds, 3),
+            "max_split_deviation": round(writer.stats.max_deviation, 5),
             "seconds": round(time.perf_counter() - start, 3),
         },
     }

@@ -61,7 +61,28 @@ class CompilerConfig:
     min_piece_size: float = 0.004
     #: A convex piece whose oriented box volume is within this fraction of its hull becomes a box geom.
     box_tolerance: float = 0.01
+    #: How non-convex pieces become hulls: "split" (plane cuts per piece until every hull follows the
+    #: surface within a tolerance) or "coacd" (one CoACD run over a link's non-convex pieces).
+    decomposer: str = "split"
+    #: Largest distance (m) of a split hull from the visual surface: handles, everything else.
+    handle_tolerance: float = 0.001
+    surface_tolerance: float = 0.002
+    #: Flat handle pieces are thickened to this (m). 0.002 would keep them within handle_tolerance of
+    #: their plane; it stays at min_thickness so that procedural cabinets (flat knob faces) compile as before.
+    handle_min_thickness: float = 0.004
+    #: Hull budget per non-convex piece (a piece that needs more keeps its last, larger hulls).
+    handle_max_hulls: int = 16
+    max_hulls_per_piece: int = 6
+    #: A body piece no thicker than this (m) whose vertices all lie on its hull is one solid panel
+    #: (PartNet often models a board by its visible faces only).
+    fill_panels: float = 0.03
+    #: Mesh files with more faces than this are rejected (they would stall a worker).
+    max_mesh_faces: int = 200000
     coacd: CoacdParams = CoacdParams()
+    #: Doors on a non-vertical hinge (flaps, lift-up doors) and vertical sliders are counterbalanced
+    #: (MuJoCo gravcomp on their body, as a gas strut or a stay holds a real one): otherwise a flap falls
+    #: open under gravity and a lift-up door cannot be held open.
+    counterbalance: bool = True
     #: Friction of cabinet and handle geoms (sliding, torsional, rolling).
     friction: tuple[float, float, float] = (1.0, 0.01, 0.0001)
     handle_condim: int = 4

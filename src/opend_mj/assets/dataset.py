@@ -72,6 +72,7 @@ def build_dataset(
     log=print,
     backend: str = "local",
     address: str | None = None,
+    cache_dir: Path | None = None,
 ) -> Manifest:
     """Compile every source (in parallel), then split the valid ones and write the manifest.
 
@@ -83,7 +84,9 @@ def build_dataset(
 
     out_root = Path(out_root)
     out_root.mkdir(parents=True, exist_ok=True)
-    cache_dir = out_root / ".cache"
+    from opend_mj.assets.compiler import default_cache_dir
+
+    cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     workers = max(1, workers or os.cpu_count() or 1)
     jobs = [(Path(s), out_root, config, language, cache_dir, force) for s in source_dirs]
     results: list[CompileResult] = []

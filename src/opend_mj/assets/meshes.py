@@ -14,13 +14,19 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from opend_mj.assets.config import CoacdParams, CompilerConfig
+
+
+#: Bump when `split_decompose` gives other hulls for the same input (invalidates its cache).
+SPLIT_VERSION = 1
 
 
 class MeshError(ValueError):
@@ -41,13 +47,23 @@ class Hull:
         return float(_hull(self.vertices).volume)
 
 
-def load_mesh_file(path: Path) -> list[tuple[trimesh.Trimesh, object]]:
+def load_mesh_file(path: Path, max_faces: int | None = None) -> list[tuple[trimesh.Trimesh, object]]:
     """Load an OBJ (or any trimesh format) as (mesh, visual) parts, one per material.
 
-    Raises MeshError for missing, empty, NaN or degenerate meshes.
+    Raises MeshError for missing, empty, NaN or degenerate meshes, and for OBJ files with more than
+    `max_faces` faces (counted before parsing, so a huge file cannot stall a worker).
     """
     if not path.is_file():
         raise MeshError(f"{path}: mesh file is missing")
+    if max_faces is not None and path.suffix.lower() == ".obj":
+        count = 0
+        with open(path, "rb") as fh:
+            for line in fh:
+                if line.startswith(b"f "):
+                    count += max(1, len(line.split()) - 3)
+        if count > max_faces:
+            raise MeshError(f"{path}: mesh has {count} faces, more than the limit of {max_faces} "
+                            f"(CompilerConfig.max_mesh_faces)")
     try:
         loaded = trimesh.load(path, process=False)
     except Exception as exc:  # trimesh raises many exception types for bad files
@@ -111,8 +127,11 @@ def weld(vertices: np.ndarray, faces: np.ndarray, decimals: int = 6) -> tuple[np
     return unique, faces
 
 
-def pieces(vertices: np.ndarray, faces: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Split a welded mesh into vertex-connected pieces (robust to non-manifold edges)."""
+def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) -> list[tuple]:
+    """Split a welded mesh into vertex-connected pieces (robust to non-manifold edges).
+
+    Each piece is (vertices, faces), plus the indices of its vertices in `vertices` if `return_index`.
+    """
     n = len(vertices)
     parent = np.arange(n)
 
@@ -134,7 +153,8 @@ def pieces(vertices: np.ndarray, faces: np.ndarray) -> list[tuple[np.ndarray, np
     for root in np.unique(face_root):
         f = faces[face_root == root]
         used, local = np.unique(f, return_inverse=True)
-        out.append((vertices[used], local.reshape(-1, 3)))
+        out.append((vertices[used], local.reshape(-1, 3), used) if return_index else
+                   (vertices[used], local.reshape(-1, 3)))
     return out
 
 
@@ -258,6 +278,284 @@ class DecompositionStats:
     decomposed_pieces: int = 0
     coacd_hulls: int = 0
     dropped_pieces: int = 0
+    #: Hulls made by the plane-split decomposition of non-convex pieces (real meshes).
+    split_hulls: int = 0
+    #: Non-convex pieces whose decomposition came from the cache.
+    cache_hits: int = 0
+    #: Largest estimated distance (m) of a split hull from the visual surface it stands for.
+    max_deviation: float = 0.0
+    #: Seconds in the plane-split decomposition (cache misses only).
+    split_seconds: float = 0.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Plane-split decomposition of non-convex pieces
+#
+# A piece whose convex hull strays from its own surface by more than a tolerance is cut by a plane
+# (across one of its box axes, where the children's hulls are smallest), the halves are split into
+# connected pieces, and each is cut again until every hull lies within the tolerance of the surface
+# (or a hull budget is spent). Distances are measured against points sampled on the piece's surface
+# (a k-d tree), so the check is cheap; the sampling makes it err on the side of cutting more.
+
+
+def _surface_points(vertices: np.ndarray, faces: np.ndarray, spacing: float, rng) -> np.ndarray:
+    """Points on a triangle soup no further than about `spacing` apart: vertices, edges and faces."""
+    tri = vertices[faces]
+    pts = [vertices]
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        length = np.linalg.norm(tri[:, b] - tri[:, a], axis=1)
+        n = np.ceil(length / spacing).astype(int)
+        if n.sum() > 1:
+            idx = np.repeat(np.arange(len(tri)), n)
+            t = rng.random(len(idx))
+            pts.append(tri[idx, a] + t[:, None] * (tri[idx, b] - tri[idx, a]))
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    n = np.ceil(2.0 * area / spacing**2).astype(int)
+    idx = np.repeat(np.arange(len(tri)), n)
+    if len(idx):
+        r1, r2 = rng.random(len(idx)), rng.random(len(idx))
+        flip = r1 + r2 > 1
+        r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
+        t = tri[idx]
+        pts.append(t[:, 0] + r1[:, None] * (t[:, 1] - t[:, 0]) + r2[:, None] * (t[:, 2] - t[:, 0]))
+    return np.vstack(pts)
+
+
+def _hull_points(points: np.ndarray, spacing: float, rng, cap: int = 20000) -> tuple[trimesh.Trimesh, np.ndarray]:
+    hull = _hull(points)
+    area = float(hull.area)
+    if area > 0 and area / spacing**2 > cap:
+        spacing = float(np.sqrt(area / cap))
+    return hull, _surface_points(np.asarray(hull.vertices), np.asarray(hull.faces), spacing, rng)
+
+
+def _slice(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, origin: np.ndarray):
+    """The part of a mesh on the positive side of a plane (faces cut at the plane), or None."""
+    try:
+        out = trimesh.intersections.slice_faces_plane(vertices, faces, normal, origin)
+    except Exception:  # a plane that misses the mesh, or degenerate cut triangles
+        return None
+    v, f = out[0], out[1]
+    if f is None or len(f) == 0:
+        return None
+    return np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64)
+
+
+def _split_volume(points: np.ndarray, min_thickness: float) -> float:
+    """Volume of a child's hull as it will be compiled (flat children thickened): the cut cost."""
+    if len(points) < 4:
+        return 0.0
+    try:
+        hull = _hull(points)
+    except Exception:
+        return 0.0
+    return float(hull.volume) + 0.5 * min_thickness * float(hull.area)
+
+
+def _covered(vertices: np.ndarray, faces: np.ndarray, hull: trimesh.Trimesh, tolerance: float) -> bool:
+    """True if the piece's faces cover every facet plane of its hull (the hull is the piece itself)."""
+    normals = np.asarray(hull.face_normals)
+    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center))
+    sign = np.where((normals[:, 0] < -1e-9) | ((np.abs(normals[:, 0]) <= 1e-9) & (normals[:, 1] < -1e-9)) |
+                    ((np.abs(normals[:, 0]) <= 1e-9) & (np.abs(normals[:, 1]) <= 1e-9) & (normals[:, 2] < 0)), -1.0, 1.0)
+    planes = np.column_stack([normals * sign[:, None], offsets * sign])
+    key = np.round(planes / [1e-3, 1e-3, 1e-3, tolerance], 0)
+    _, plane_of, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    plane_of = plane_of.reshape(-1)
+    n_planes = int(plane_of.max()) + 1
+    hull_area = np.bincount(plane_of, weights=np.asarray(hull.area_faces), minlength=n_planes)
+    rep = np.zeros((n_planes, 4))
+    rep[plane_of] = planes
+    tri = vertices[faces]
+    dist = np.abs(np.einsum("fvk,pk->fvp", tri, rep[:, :3]) - rep[None, None, :, 3]).max(axis=1)  # (faces, planes)
+    on = dist <= tolerance
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    first = np.where(on.any(axis=1), on.argmax(axis=1), -1)
+    covered = np.bincount(first[first >= 0], weights=area[first >= 0], minlength=n_planes)
+    flat = float(np.min(oriented_box(np.asarray(hull.vertices))[2])) * 2 <= tolerance
+    need = hull_area / 2 if flat else hull_area
+    return bool(np.all(covered >= 0.995 * need))
+
+
+def _caps(vertices: np.ndarray, faces: np.ndarray, size: float) -> np.ndarray:
+    """Fan triangles closing open boundaries no wider than `size` (an open tube end, a missing cap)."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    boundary = uniq[counts == 1]
+    if not len(boundary):
+        return np.zeros((0, 3, 3))
+    used, local = np.unique(boundary, return_inverse=True)
+    local = local.reshape(-1, 2)
+    out = []
+    for bv, be in pieces(vertices[used], np.column_stack([local, local[:, 1]])):
+        centre = bv.mean(axis=0)
+        if float(np.linalg.norm(bv - centre, axis=1).max()) <= size:
+            out.append(np.stack([bv[be[:, 0]], bv[be[:, 1]], np.broadcast_to(centre, (len(be), 3))], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 3, 3))
+
+
+def split_decompose(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    tolerance: float,
+    min_thickness: float,
+    max_hulls: int,
+    min_size: float,
+    fill_panels: float = 0.0,
+) -> tuple[list[np.ndarray], float]:
+    """Cut one welded, connected, non-convex piece into convex point sets within `tolerance` (m).
+
+    Returns the hull point sets and the largest estimated hull-to-surface distance that is left
+    (above `tolerance` only where the hull budget `max_hulls` ran out). Open boundaries narrower than
+    `cap` (an open tube end) count as closed. `fill_panels` > 0 keeps, as one solid, a piece no thicker
+    than that whose vertices all lie on its hull: a board modelled by some of its faces only.
+    """
+    import heapq
+
+    rng = np.random.default_rng(0)
+    hull0 = _hull(vertices)
+    if _covered(vertices, faces, hull0, tolerance / 4):
+        return [np.asarray(hull0.vertices)], 0.0
+    if fill_panels > 0:
+        thickness = 2 * float(np.min(oriented_box(vertices)[2]))
+        if min_thickness <= thickness <= fill_panels and _on_hull(vertices, hull0, tolerance):
+            return [np.asarray(hull0.vertices)], 0.0
+    caps = _caps(vertices, faces, max(fill_panels, 0.03))
+    area = float(trimesh.Trimesh(vertices, faces, process=False).area)
+    spacing = max(tolerance / 2.0, float(np.sqrt(area / 30000.0)))
+    surface = [_surface_points(vertices, faces, spacing, rng)]
+    if len(caps):
+        cv = caps.reshape(-1, 3)
+        surface.append(_surface_points(cv, np.arange(len(cv)).reshape(-1, 3), spacing, rng))
+    tree = cKDTree(np.vstack(surface))
+    _, axes, _ = oriented_box(vertices)
+    axes = axes.T
+    done: list[np.ndarray] = []
+    worst = 0.0
+    heap: list = []
+    counter = 0
+
+    def push(pv, pf):
+        nonlocal counter
+        if float(np.linalg.norm(np.ptp(pv, axis=0))) < min_size or len(pv) < 4:
+            return
+        try:
+            hull, samples = _hull_points(pv, tolerance, rng, cap=1500)
+        except Exception:
+            return
+        dist = tree.query(samples)[0]
+        k = int(np.argmax(dist))
+        heapq.heappush(heap, (-float(dist[k]), counter, pv, pf, hull, samples[k]))
+        counter += 1
+
+    push(vertices, faces)
+    while heap:
+        negdev, _, pv, pf, hull, far = heapq.heappop(heap)
+        dev = -negdev
+        if dev <= tolerance or len(done) + len(heap) + 2 > max_hulls:
+            done.append(np.asarray(hull.vertices))
+            worst = max(worst, dev)
+            continue
+        best = None
+        for axis in axes:
+            t = pv @ axis
+            lo, hi = float(t.min()), float(t.max())
+            if hi - lo < 2 * min_size:
+                continue
+            cuts = [lo + 0.5 * (hi - lo)]
+            tk = float(far @ axis)
+            if lo + 0.1 * (hi - lo) < tk < hi - 0.1 * (hi - lo):
+                cuts.append(tk)
+            for c in cuts:
+                origin = axis * c
+                a = _slice(pv, pf, axis, origin)
+                b = _slice(pv, pf, -axis, origin)
+                if a is None or b is None:
+                    continue
+                cost = _split_volume(a[0], min_thickness) + _split_volume(b[0], min_thickness)
+                if best is None or cost < best[0]:
+                    best = (cost, a, b)
+        if best is None:
+            done.append(np.asarray(hull.vertices))
+            worst = max(worst, dev)
+            continue
+        for cv, cf in (best[1], best[2]):
+            wv, wf = weld(cv, cf, decimals=7)
+            if len(wf):
+                for piece in pieces(wv, wf):
+                    push(*piece)
+    return done, worst
+
+
+def _on_hull(points: np.ndarray, hull: trimesh.Trimesh, tolerance: float) -> bool:
+    """True if every point lies within `tolerance` of the hull's boundary (none sits deep inside)."""
+    normals = np.asarray(hull.face_normals)
+    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center))
+    depth = offsets[None, :] - points @ normals.T  # >= 0 inside, per facet plane
+    return bool(np.all(depth.min(axis=1) <= tolerance))
+
+
+def _piece_key(vertices: np.ndarray, faces: np.ndarray, extra: str) -> tuple[str, np.ndarray]:
+    """Cache key of a piece up to translation (copies of one part share it), and the shift used."""
+    shift = np.round(vertices.min(axis=0), 5)
+    key = hashlib.sha256()
+    key.update(np.ascontiguousarray(np.round(vertices - shift, 6)).tobytes())
+    key.update(np.ascontiguousarray(faces.astype(np.int64)).tobytes())
+    key.update(extra.encode())
+    return key.hexdigest()[:32], shift
+
+
+def cached_split(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    tolerance: float,
+    min_thickness: float,
+    max_hulls: int,
+    min_size: float,
+    fill_panels: float,
+    cache_dir: Path | None,
+    memo: dict | None = None,
+    stats: DecompositionStats | None = None,
+) -> list[np.ndarray]:
+    """`split_decompose`, cached on disk (and in `memo`) by piece shape, settings and SPLIT_VERSION."""
+    import time
+
+    stats = stats if stats is not None else DecompositionStats()
+    extra = repr((SPLIT_VERSION, tolerance, min_thickness, max_hulls, min_size, fill_panels))
+    key, shift = _piece_key(vertices, faces, extra)
+    local = None
+    if memo is not None and key in memo:
+        local, worst = memo[key]
+        stats.cache_hits += 1
+    cache_file = cache_dir / "split" / key[:2] / f"{key}.npz" if cache_dir else None
+    if local is None and cache_file is not None and cache_file.is_file():
+        try:
+            with np.load(cache_file) as data:
+                worst = float(data["worst"])
+                local = [data[k] for k in sorted((k for k in data.files if k != "worst"), key=lambda s: int(s[1:]))]
+            stats.cache_hits += 1
+        except (OSError, ValueError, KeyError):
+            local = None
+    if local is None:
+        start = time.perf_counter()
+        hulls, worst = split_decompose(vertices - shift, faces, tolerance, min_thickness, max_hulls, min_size,
+                                       fill_panels)
+        stats.split_seconds += time.perf_counter() - start
+        local = hulls
+        if cache_file is not None:
+            try:
+                cache_file.parent.mkdir(parents=True, exist_ok=True)
+                buffer = io.BytesIO()
+                np.savez_compressed(buffer, worst=np.array(worst), **{f"h{i}": h for i, h in enumerate(hulls)})
+                tmp = cache_file.with_suffix(f".{os.getpid()}.tmp")
+                tmp.write_bytes(buffer.getvalue())
+                tmp.replace(cache_file)
+            except OSError:
+                pass  # a read-only cache is no reason to fail a build
+    if memo is not None:
+        memo[key] = (local, worst)
+    stats.max_deviation = max(stats.max_deviation, worst)
+    return [h + shift for h in local]
 
 
 def collision_hulls(
@@ -266,25 +564,28 @@ def collision_hulls(
     config: CompilerConfig,
     cache_dir: Path | None,
     stats: DecompositionStats | None = None,
+    groups: np.ndarray | None = None,
+    handle: bool = False,
+    memo: dict | None = None,
 ) -> list[Hull]:
-    """Convex collision hulls for one merged mesh (a link's body or one handle)."""
+    """Convex collision hulls for one merged mesh (a link's body or its handles).
+
+    `groups` (one id per face, e.g. the source file) keeps pieces of different files apart when a
+    surface soup has to be welded; `handle` selects the handle tolerance and thickness.
+    """
     stats = stats if stats is not None else DecompositionStats()
     hulls: list[Hull] = []
-    rest_v: list[np.ndarray] = []
-    rest_f: list[np.ndarray] = []
-    offset = 0
 
-    def classify(pv: np.ndarray, pf: np.ndarray, allow_flat: bool = True) -> bool:
-        """Keep a piece as one hull if it is convex (or flat); return False if it is not."""
+    def classify(pv: np.ndarray, pf: np.ndarray) -> bool:
+        """Keep a closed piece as one hull if it is convex; return False if it is not."""
         size = float(np.linalg.norm(np.ptp(pv, axis=0)))
         if size < config.min_piece_size:
             stats.dropped_pieces += 1
             return True
         _, _, half = oriented_box(pv)
-        flat = 2 * float(np.min(half)) < config.min_thickness
-        if flat and not allow_flat:
+        if 2 * float(np.min(half)) < config.min_thickness:
             return False
-        if not (flat or is_convex_piece(pv, pf, config.convex_tolerance)):
+        if not is_convex_piece(pv, pf, config.convex_tolerance):
             return False
         hull = to_hull(pv, config)
         if hull is not None:
@@ -297,32 +598,96 @@ def collision_hulls(
     # separate convex pieces.
     pool_v: list[np.ndarray] = []
     pool_f: list[np.ndarray] = []
+    pool_g: list[np.ndarray] = []
     pool_offset = 0
-    for raw_v, raw_f in pieces(vertices, faces):
-        pv, pf = weld(raw_v, raw_f)
-        if len(pf) >= 4 and classify(pv, pf, allow_flat=False):
-            continue
+    face_group = np.zeros(len(faces), dtype=np.int64) if groups is None else np.asarray(groups)
+    vertex_group = np.zeros(len(vertices), dtype=np.int64)
+    vertex_group[faces.reshape(-1)] = np.repeat(face_group, 3)
+    for raw_v, raw_f, used in pieces(vertices, faces, return_index=True):
+        # (welding only removes faces: a piece of fewer than 4 faces cannot pass, skip the weld)
+        if len(raw_f) >= 4:
+            pv, pf = weld(raw_v, raw_f)
+            if len(pf) >= 4 and classify(pv, pf):
+                continue
         pool_v.append(raw_v)
         pool_f.append(raw_f + pool_offset)
+        pool_g.append(np.full(len(raw_f), vertex_group[used[0]]))
         pool_offset += len(raw_v)
-    # Pass 2: what is left (surface soups with split vertices) is welded as a whole and split again.
-    if pool_v:
-        wv, wf = weld(np.vstack(pool_v), np.vstack(pool_f))
+    if not pool_v:
+        return hulls
+    pv_all, pf_all, pg_all = np.vstack(pool_v), np.vstack(pool_f), np.concatenate(pool_g)
+    if config.decomposer == "coacd":
+        _coacd_rest(pv_all, pf_all, config, cache_dir, stats, hulls)
+        return hulls
+
+    # Pass 2: what is left (surface soups, flat panels, non-convex parts) is welded per source file,
+    # split into connected pieces, and each piece is cut into hulls that follow its surface.
+    if handle:
+        tolerance, thickness, budget = config.handle_tolerance, config.handle_min_thickness, config.handle_max_hulls
+        fill = 0.0
+    else:
+        tolerance, thickness, budget = config.surface_tolerance, config.min_thickness, config.max_hulls_per_piece
+        fill = config.fill_panels
+    hull_config = config if thickness == config.min_thickness else _with_thickness(config, thickness)
+    for g in np.unique(pg_all):
+        sel = pg_all == g
+        used, local = np.unique(pf_all[sel], return_inverse=True)
+        wv, wf = weld(pv_all[used], local.reshape(-1, 3))
         for pv, pf in pieces(wv, wf):
-            if classify(pv, pf):
+            if float(np.linalg.norm(np.ptp(pv, axis=0))) < config.min_piece_size:
+                stats.dropped_pieces += 1
                 continue
-            rest_v.append(pv)
-            rest_f.append(pf + offset)
-            offset += len(pv)
+            flat = len(pv) < 4 or 2 * float(np.min(oriented_box(pv)[2])) < config.min_thickness
+            if len(pv) < 4 or (flat and _covered(pv, pf, _hull(pv), tolerance / 4)):
+                # a lone triangle or a convex flat plate: one thickened plate, as it is
+                hull = to_hull(pv, hull_config)
+                if hull is not None:
+                    hulls.append(hull)
+                    stats.convex_pieces += 1
+                continue
+            stats.decomposed_pieces += 1
+            for points in cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill,
+                                       cache_dir, memo, stats):
+                hull = to_hull(points, hull_config)
+                if hull is not None:
+                    hulls.append(hull)
+                    stats.split_hulls += 1
+    return hulls
+
+
+def _with_thickness(config: CompilerConfig, thickness: float) -> CompilerConfig:
+    import dataclasses
+
+    return dataclasses.replace(config, min_thickness=thickness)
+
+
+def _coacd_rest(rv, rf, config, cache_dir, stats, hulls) -> None:
+    """The former path: everything that is not convex in one CoACD run (config.decomposer == "coacd")."""
+    wv, wf = weld(rv, rf)
+    rest_v, rest_f, offset = [], [], 0
+    for pv, pf in pieces(wv, wf):
+        size = float(np.linalg.norm(np.ptp(pv, axis=0)))
+        if size < config.min_piece_size:
+            stats.dropped_pieces += 1
+            continue
+        _, _, half = oriented_box(pv)
+        flat = 2 * float(np.min(half)) < config.min_thickness
+        if flat or is_convex_piece(pv, pf, config.convex_tolerance):
+            hull = to_hull(pv, config)
+            if hull is not None:
+                hulls.append(hull)
+                stats.convex_pieces += 1
+            continue
+        rest_v.append(pv)
+        rest_f.append(pf + offset)
+        offset += len(pv)
     if rest_v:
-        rv, rf = np.vstack(rest_v), np.vstack(rest_f)
         stats.decomposed_pieces += len(rest_v)
-        for points in coacd_decompose(rv, rf, config.coacd, cache_dir):
+        for points in coacd_decompose(np.vstack(rest_v), np.vstack(rest_f), config.coacd, cache_dir):
             hull = to_hull(points, config)
             if hull is not None:
                 hulls.append(hull)
                 stats.coacd_hulls += 1
-    return hulls
 
 
 def mass_properties(hulls: list[Hull], density: float) -> tuple[float, np.ndarray, np.ndarray]:

@@ -117,9 +117,16 @@ def _load_urdf(urdf_path: Path):
     if not urdf_path.is_file():
         raise SourceError(f"{urdf_path}: no mobility.urdf in this folder")
     try:
-        etree.parse(str(urdf_path))
+        tree = etree.parse(str(urdf_path))
     except etree.XMLSyntaxError as exc:
         raise SourceError(f"{urdf_path}: malformed URDF XML ({exc})") from exc
+    for tag in ("link", "joint"):
+        seen: set[str] = set()
+        for el in tree.getroot().findall(tag):
+            name = el.get("name")
+            if name in seen:
+                raise SourceError(f"{urdf_path}: duplicate {tag} name {name!r}")
+            seen.add(name)
     try:
         return yourdfpy.URDF.load(
             str(urdf_path), build_scene_graph=False, load_meshes=False,
@@ -154,7 +161,7 @@ def _material(visual) -> tuple[tuple[float, float, float, float], object | None,
     return (1.0, 1.0, 1.0, 1.0), image, np.asarray(uv, dtype=float)
 
 
-def read_source(path: Path, scale: float) -> CabinetSource:
+def read_source(path: Path, scale: float, max_faces: int | None = None) -> CabinetSource:
     """Parse and validate a PartNet-Mobility folder; raise SourceError naming the file and problem."""
     path = Path(path)
     if not path.is_dir():
@@ -230,13 +237,13 @@ def read_source(path: Path, scale: float) -> CabinetSource:
                     notes.append(f"primitive visual on {link_name} ignored (PartNet uses meshes)")
                     continue
                 raise SourceError(f"{urdf_path}: visual {index} of link {link_name} has no mesh")
-            mesh_file = path / geometry.mesh.filename
+            mesh_file = _inside(path, geometry.mesh.filename, urdf_path)
             mesh_scale = np.ones(3) if geometry.mesh.scale is None else np.broadcast_to(
                 np.asarray(geometry.mesh.scale, dtype=float), (3,))
             origin = visual.origin if visual.origin is not None else np.eye(4)
             transform = world[link_name] @ origin
             try:
-                loaded = load_mesh_file(mesh_file)
+                loaded = load_mesh_file(mesh_file, max_faces)
             except MeshError as exc:
                 raise SourceError(f"{exc} (visual '{visual.name}' of link {link_name})", "mesh_error") from exc
             for mesh, vis in loaded:
@@ -264,6 +271,19 @@ def read_source(path: Path, scale: float) -> CabinetSource:
         if part.joint is not None:
             part.joint.anchor = part.joint.anchor + shift
     return source
+
+
+def _inside(root: Path, filename: str, urdf_path: Path) -> Path:
+    """The mesh path of a URDF visual, refused (not read) if it leaves the source folder."""
+    name = str(filename)
+    if name.startswith("package://") or name.startswith("file://"):
+        name = name.split("://", 1)[1]
+    candidate = Path(name)
+    resolved = (root / candidate).resolve()
+    if candidate.is_absolute() or not resolved.is_relative_to(root.resolve()):
+        raise SourceError(f"{urdf_path}: mesh path {filename!r} leaves the source folder (refused, not read)",
+                          "mesh_error")
+    return root / candidate
 
 
 def _read_semantics(path: Path) -> dict[str, str]:

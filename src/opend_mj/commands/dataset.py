@@ -23,12 +23,16 @@ import click
 @click.option("--scale", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Scale from PartNet units to metres (default 0.7, as in the paper).")
 @click.option("--force", is_flag=True, help="Rebuild even where the cache is valid.")
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Decomposition cache shared across output folders (default: $OPEND_CACHE_DIR, else "
+                   "$XDG_CACHE_HOME/opend-mj, else ~/.cache/opend-mj).")
 @click.option("--no-progress", is_flag=True, help="No progress bar (for logs).")
 @click.option("--backend", type=click.Choice(["local", "ray"]), default="local", show_default=True,
               help="local: this machine's process pool; ray: a Ray cluster (--address) or a local Ray instance.")
 @click.option("--address", default=None, help="Ray cluster address (e.g. auto); with --backend ray. The "
               "cluster's machines must see --source and --out at the same paths.")
-def build_assets(source, out, ids, count, seed, workers, scale, force, no_progress, backend, address) -> None:
+def build_assets(source, out, ids, count, seed, workers, scale, force, cache_dir, no_progress, backend,
+                 address) -> None:
     """Compile cabinets into MJCF, filter them, split them and write the manifest."""
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
@@ -57,7 +61,8 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, no_progre
 
     try:
         manifest = build_dataset(sources, out, config=config, dataset=dataset, workers=workers, force=force,
-                                 progress=not no_progress, backend=backend, address=address)
+                                 progress=not no_progress, backend=backend, address=address,
+                                 cache_dir=cache_dir)
     except BackendError as exc:
         raise click.ClickException(str(exc)) from exc
     info = manifest.info
