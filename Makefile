@@ -25,13 +25,15 @@ evaluate: install
 ## oracle planner with all four hands on every target, and score it. The build's hash split is the
 ## train part (tune on it) and the test part (report it as validation). Outputs stay under build/
 ## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository.
+## SPLIT=test runs the validation part only.
 SOURCE ?= ../shared/opend-train
-REAL_CABINETS ?= build/real-cabinets
+REAL_CABINETS ?= build/$(notdir $(abspath $(SOURCE)))
 REAL_OUT ?= build/real-results
+SPLIT ?= all
 eval-real: install
 	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
 	mkdir -p $(REAL_OUT)
-	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split all \
+	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split $(SPLIT) \
 		--workers $(WORKERS) --cabinets $(REAL_CABINETS) --out $(REAL_OUT)/oracle_real.jsonl
 	$(BIN)/opend score $(REAL_OUT)/oracle_real.jsonl --csv $(REAL_OUT)/scores.csv --plot $(REAL_OUT)/scores.png
 
@@ -72,9 +74,7 @@ bench-assets: install
 
 ## Real cabinets (PartNet-Mobility layout, e.g. SOURCE=../shared/opend-train), one worker: cold and cached
 ## seconds, hulls, physics checks, collision-vs-visual fidelity -> build/bench-real/summary.md; the compiled
-## dataset (with manifest.json) stays in $(REAL_CABINETS). EVERY=7 measures every 7th source.
-SOURCE ?= ../shared/opend-train
-REAL_CABINETS ?= build/$(notdir $(abspath $(SOURCE)))
+## dataset (with manifest.json) stays in $(REAL_CABINETS), shared with eval-real. EVERY=7 measures every 7th source.
 EVERY ?= 1
 bench-assets-real: install
 	@if [ ! -d "$(SOURCE)" ]; then echo "bench-assets-real: no source folder $(SOURCE) (set SOURCE=...)"; exit 2; fi
