@@ -24,7 +24,6 @@ from scipy.spatial import cKDTree
 
 from opend_mj.assets.config import CoacdParams, CompilerConfig
 
-
 #: Bump when `split_decompose` gives other hulls for the same input (invalidates its cache).
 SPLIT_VERSION = 1
 

@@ -102,7 +102,12 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
         raise click.UsageError("--address needs --backend ray")
     policy_spec, parsed_args = None, ()
     if policy is not None:
-        from opend_mj.evaluation.agents import agent_name, load_agent, parse_policy_args, resolve_policy
+        from opend_mj.evaluation.agents import (
+            agent_name,
+            load_agent,
+            parse_policy_args,
+            resolve_policy,
+        )
 
         if ctx.get_parameter_source("solver") is not click.core.ParameterSource.DEFAULT:
             raise click.UsageError("--policy and --solver exclude each other (an agent finds the handle itself)")

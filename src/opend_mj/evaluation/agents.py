@@ -26,8 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj.evaluation.episode import EpisodeJob, record_fields
+from opend_mj.evaluation.grading import failure_stage
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder
-from opend_mj.evaluation.runner import instruction_for, make_episode_env, error_record, run_episode_group
+from opend_mj.evaluation.runner import (
+    error_record,
+    instruction_for,
+    make_episode_env,
+    run_episode_group,
+)
 from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, agent_name
 
 #: The protocol's time limit for an agent (s of simulated time): TaskConfig's default episode length.
@@ -209,14 +215,8 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     if diverged:
         failed = "physics"
         values = {"success": False, "open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
-    elif outcome.success:
-        failed = None
-    elif closest > 0.02:
-        failed = "approach"
-    elif outcome.range_ratio < 0.03:
-        failed = "grasp"
     else:
-        failed = "pull"
+        failed = failure_stage(outcome.success, outcome.range_ratio, closest, check_locate=False)
     return {
         "cabinet_dir": job.cabinet_dir,
         "target_type": task.target.kind,

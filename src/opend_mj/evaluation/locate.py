@@ -24,9 +24,8 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from opend_mj.evaluation.episode import EpisodeJob  # noqa: E402
+from opend_mj.evaluation.grading import box_centre, box_contains  # noqa: E402
 from opend_mj.evaluation.jobs import make_jobs  # noqa: E402
-
-PAD_PX = 3.0
 
 
 @dataclass
@@ -49,18 +48,14 @@ class LocateRecord:
     seconds: float
 
 
-def _inside(box, u: float, v: float, pad: float = PAD_PX) -> bool:
-    return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
-
-
 def grade(box, target_joint: str, boxes: dict[str, tuple | None]) -> str:
     """located / wrong_handle / missed for a predicted ``box`` (u0, v0, u1, v1) or None."""
     if box is None:
         return "missed"
-    u, v = 0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3])
-    if _inside(boxes.get(target_joint), u, v):
+    u, v = box_centre(box)
+    if box_contains(boxes.get(target_joint), u, v):
         return "located"
-    if any(_inside(b, u, v) for j, b in boxes.items() if j != target_joint):
+    if any(box_contains(b, u, v) for j, b in boxes.items() if j != target_joint):
         return "wrong_handle"
     return "missed"
 

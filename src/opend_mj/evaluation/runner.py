@@ -24,11 +24,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np  # noqa: E402
 
 from opend_mj.evaluation.episode import EpisodeJob, record_fields  # noqa: E402
+from opend_mj.evaluation.grading import failure_stage  # noqa: E402
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder  # noqa: E402
-
-
-def _box_contains(box, u, v, pad=3.0) -> bool:
-    return box is not None and box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
 
 
 def run_episode(job: EpisodeJob, env=None) -> dict:
@@ -235,17 +232,8 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
     outcome = task.outcome(physics)
 
     # failure stage (ground truth, for the tables)
-    failed = None
-    if not outcome.success:
-        box = plan.box["box"] if plan.box else None
-        if box is None or gt_box is None or not _box_contains(gt_box, (box[0] + box[2]) / 2, (box[1] + box[3]) / 2):
-            failed = "locate"
-        elif probes.get("site_to_handle", 1.0) > 0.02:
-            failed = "approach"
-        elif outcome.range_ratio < 0.03:
-            failed = "grasp"
-        else:
-            failed = "pull"
+    failed = failure_stage(outcome.success, outcome.range_ratio, probes.get("site_to_handle", 1.0),
+                           box=plan.box["box"] if plan.box else None, gt_box=gt_box)
     return {
         "cabinet_dir": job.cabinet_dir,
         "target_type": target.kind,

@@ -32,7 +32,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from opend_mj.sim.hands import HandSpec, grasp_pose_to_root_pose, touch_dict, touch_parts
+from opend_mj.sim.hands import (
+    HandSpec,
+    grasp_pose_to_root_pose,
+    touch_dict,
+    touch_parts,
+)
 
 AGENT_CONTROLS = ("absolute", "delta")
 AGENT_IMAGES = ("first", "every_step")

@@ -241,27 +241,10 @@ def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance:
     front plane (within `tolerance` of the panel seen behind the handle) until the plane ends; a handle
     sits near the free edge, so the hinge is on the side where the plane reaches farther.
     """
-    h, w = depth.shape
-    uc, vc = view.project(handle.centre[None, :])[0]
-    if not (np.isfinite(uc) and np.isfinite(vc)):
+    edges = door_edges(handle, depth, view, tolerance, gap_pixels)
+    if edges is None:
         return None
-    row = int(np.clip(vc, 0, h - 1))
-    cols = np.arange(w) + 0.5
-    points = view.backproject(cols, np.full(w, row + 0.5), depth[row])
-    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
-    start = int(np.clip(uc, 0, w - 1))
-
-    def reach(step: int) -> float:
-        col, misses, last = start, 0, start
-        while 0 <= col < w and misses <= gap_pixels:
-            if on_plane[col]:
-                last, misses = col, 0
-            else:
-                misses += 1
-            col += step
-        return abs(float(points[last, 1] - handle.centre[1]))
-
-    toward_left, toward_right = reach(-1), reach(+1)  # image-left is +y (the viewer's left)
+    toward_left, toward_right = (abs(edge - float(handle.centre[1])) for edge in edges)  # image-left is +y
     if max(toward_left, toward_right) < 0.05 or abs(toward_left - toward_right) < 0.02:
         return None
     return "left" if toward_left > toward_right else "right"

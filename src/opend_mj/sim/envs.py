@@ -44,7 +44,13 @@ from dm_env import specs  # noqa: E402
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
 from opend_mj.language import describe_instruction  # noqa: E402
 from opend_mj.sim.hands import HandTouch, get_hand, load_spec, touch_parts  # noqa: E402
-from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, RewardProbe, dense_reward, sparse_reward  # noqa: E402
+from opend_mj.sim.rewards import (  # noqa: E402
+    REWARD_MODES,
+    DenseRewardConfig,
+    RewardProbe,
+    dense_reward,
+    sparse_reward,
+)
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
 from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
 from opend_mj.transforms import axis_angle_quat, mat_to_quat, quat_mul, turn_about_z  # noqa: E402
