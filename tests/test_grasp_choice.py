@@ -124,3 +124,22 @@ def test_parallel_gripper_pinches_every_bar():
     bar, posts = _bar(thickness=0.008, gap=0.008)
     _, _, grasp = _choose("franka", [bar, *posts], bar)
     assert grasp.style == "hook"  # the gripper closes across the bar whatever the gap (pinch_gap 0)
+
+
+def test_a_box_over_a_pair_of_pulls_becomes_the_nearer_pull():
+    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.perception import one_of_paired_handles
+
+    depth = np.full((64, 128), 1.0)
+    depth[30:34, 20:34] = 0.965  # left cup pull, 3.5 cm proud
+    depth[30:34, 90:104] = 0.965  # right cup pull
+    pair = HandleBox(20, 30, 104, 34, orientation="horizontal")
+    single = one_of_paired_handles(pair, depth)
+    assert single is not None and single.orientation == "horizontal"
+    assert (single.u0, single.u1, single.v0, single.v1) in {(20, 34, 30, 34), (90, 104, 30, 34)}
+    # one bar under the box: nothing to choose
+    bar = depth.copy()
+    bar[30:34, 20:104] = 0.965
+    assert one_of_paired_handles(pair, bar) is None
+    # bare panel: nothing to choose either
+    assert one_of_paired_handles(pair, np.full((64, 128), 1.0)) is None

@@ -171,6 +171,45 @@ def refine_box_with_depth(box: HandleBox, depth: np.ndarray, view, margin_px: in
                      orientation=box.orientation)
 
 
+def one_of_paired_handles(box: HandleBox, depth: np.ndarray, min_protrusion: float = 0.015,
+                          max_protrusion: float = 0.08, centre_px: int = 2) -> HandleBox | None:
+    """The nearer of two or more separate handles that one box covers, or None when it covers one.
+
+    Some fronts carry a pair of pulls (a cup pull near each end): the target's handle box then spans
+    both, and its centre is bare panel. Inside the box, pixels standing `min_protrusion` or more out of
+    the panel are handle; when the box centre (within `centre_px`) is not such a pixel and the handle
+    pixels form two or more groups, the group nearest the centre becomes the box (the first in image
+    order on a tie).
+    """
+    from scipy import ndimage
+
+    h, w = depth.shape
+    u0, v0 = int(max(0, math.floor(box.u0))), int(max(0, math.floor(box.v0)))
+    u1, v1 = int(min(w, math.ceil(box.u1))), int(min(h, math.ceil(box.v1)))
+    if u1 - u0 < 3 or v1 - v0 < 1:
+        return None
+    around = depth[max(0, v0 - 6):min(h, v1 + 6), max(0, u0 - 6):min(w, u1 + 6)]
+    around = around[np.isfinite(around)]
+    if around.size == 0:
+        return None
+    panel = float(np.median(around))  # the panel: the common depth around the box
+    inner = depth[v0:v1, u0:u1]
+    proud = (inner < panel - min_protrusion) & (inner > panel - max_protrusion)
+    uc, vc = box.centre
+    cu, cv = int(uc) - u0, int(vc) - v0
+    near = proud[max(0, cv - centre_px):cv + centre_px + 1, max(0, cu - centre_px):cu + centre_px + 1]
+    if near.any():
+        return None
+    labels, n = ndimage.label(proud, structure=np.ones((3, 3), bool))
+    groups = [np.nonzero(labels == k) for k in range(1, n + 1)]
+    groups = [g for g in groups if len(g[0]) >= 3]
+    if len(groups) < 2:
+        return None
+    rows, cols = min(groups, key=lambda g: float(np.min(np.hypot(g[1] + u0 + 0.5 - uc, g[0] + v0 + 0.5 - vc))))
+    return HandleBox(u0 + cols.min(), v0 + rows.min(), u0 + cols.max() + 1, v0 + rows.max() + 1,
+                     orientation=box.orientation, score=box.score)
+
+
 def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEstimate | None:
     """Back-project the solver's box with the depth image into a 3D handle centre and orientation.
 

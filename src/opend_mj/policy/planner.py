@@ -37,6 +37,7 @@ from opend_mj.policy.perception import (
     estimate_handle,
     infer_hinge_side,
     measure_handle,
+    one_of_paired_handles,
     refine_box_with_depth,
 )
 from opend_mj.sim.hands import (
@@ -109,6 +110,8 @@ class PlannerConfig:
     #: snap a learned solver's box to the handle that stands out of the panel in the depth image
     #: (not the oracle's exact boxes: refining them lost 1-6 points on the test split)
     refine_with_depth: bool = True
+    #: a box over a pair of pulls (its centre bare panel, two handles in depth) -> the nearer pull
+    one_of_paired_handles: bool = True
     #: a door's pull direction may point back toward the cabinet (+x) at most this much (sin of angle)
     max_pull_toward_cabinet: float = 0.35
     #: an episode lasts at least this long (s of simulated time)
@@ -456,6 +459,11 @@ class Planner:
         if box is not None and cfg.refine_with_depth and not getattr(self.solver, "exact", False):
             result.events.append({"solver_box": box.to_dict()})
             box = refine_box_with_depth(box, obs.depth, obs.camera_view)
+        if box is not None and cfg.one_of_paired_handles:
+            single = one_of_paired_handles(box, obs.depth)
+            if single is not None:  # a pair of pulls under one box: take the nearer one
+                result.events.append({"paired_handles_box": box.to_dict()})
+                box = single
         result.box = box.to_dict() if box is not None else None
         handle = estimate_handle(box, obs.depth, obs.camera_view, cfg) if box is not None else None
         if handle is not None:
