@@ -132,7 +132,7 @@ def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) 
     Each piece is (vertices, faces), plus the indices of its vertices in `vertices` if `return_index`.
     """
     n = len(vertices)
-    parent = np.arange(n)
+    parent = list(range(n))  # a Python list and Python ints: the union-find loop is pure Python
 
     def find(i: int) -> int:
         root = i
@@ -142,11 +142,11 @@ def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) 
             parent[i], i = root, parent[i]
         return root
 
-    for a, b, c in faces:
+    for a, b, c in np.asarray(faces).tolist():
         ra, rb, rc = find(a), find(b), find(c)
         parent[rb] = ra
         parent[find(rc)] = ra
-    roots = np.array([find(i) for i in range(n)])
+    roots = np.array([find(i) for i in range(n)], dtype=np.int64)
     face_root = roots[faces[:, 0]]
     out = []
     for root in np.unique(face_root):
