@@ -132,7 +132,7 @@ def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) 
     Each piece is (vertices, faces), plus the indices of its vertices in `vertices` if `return_index`.
     """
     n = len(vertices)
-    parent = np.arange(n)
+    parent = list(range(n))  # a Python list and Python ints: the union-find loop is pure Python
 
     def find(i: int) -> int:
         root = i
@@ -142,11 +142,11 @@ def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) 
             parent[i], i = root, parent[i]
         return root
 
-    for a, b, c in faces:
+    for a, b, c in np.asarray(faces).tolist():
         ra, rb, rc = find(a), find(b), find(c)
         parent[rb] = ra
         parent[find(rc)] = ra
-    roots = np.array([find(i) for i in range(n)])
+    roots = np.array([find(i) for i in range(n)], dtype=np.int64)
     face_root = roots[faces[:, 0]]
     out = []
     for root in np.unique(face_root):
@@ -161,9 +161,27 @@ def _hull(points: np.ndarray) -> trimesh.Trimesh:
     return trimesh.convex.convex_hull(points, qhull_options="QbB Pp QJ")
 
 
+#: Recent `oriented_box` results by input bytes: the pipeline asks for the box of one point set more than
+#: once (a piece's flatness check, then `thicken`); the box is a pure function of the points.
+_BOX_MEMO: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+_BOX_MEMO_SIZE = 512
+
+
 def oriented_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Minimum-volume-ish oriented box: (centre, rotation columns = box axes, half sizes)."""
     points = np.asarray(points, dtype=float)
+    key = repr(points.shape).encode() + np.ascontiguousarray(points).tobytes()
+    hit = _BOX_MEMO.get(key)
+    if hit is None:
+        hit = _oriented_box(points)
+        if len(_BOX_MEMO) >= _BOX_MEMO_SIZE:
+            del _BOX_MEMO[next(iter(_BOX_MEMO))]
+        _BOX_MEMO[key] = tuple(np.array(a, copy=True) for a in hit)
+        return hit
+    return tuple(a.copy() for a in hit)
+
+
+def _oriented_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     try:
         to_origin, extents = trimesh.bounds.oriented_bounds(points)
         transform = np.linalg.inv(to_origin)
@@ -371,6 +389,11 @@ def _covered(vertices: np.ndarray, faces: np.ndarray, hull: trimesh.Trimesh, tol
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     first = np.where(on.any(axis=1), on.argmax(axis=1), -1)
     covered = np.bincount(first[first >= 0], weights=area[first >= 0], minlength=n_planes)
+    # The box (for `flat`) only matters when the coverage lies between half and all of the hull's area.
+    if np.all(covered >= 0.995 * hull_area):
+        return True
+    if not np.all(covered >= 0.995 * (hull_area / 2)):
+        return False
     flat = float(np.min(oriented_box(np.asarray(hull.vertices))[2])) * 2 <= tolerance
     need = hull_area / 2 if flat else hull_area
     return bool(np.all(covered >= 0.995 * need))
