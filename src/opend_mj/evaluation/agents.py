@@ -19,19 +19,16 @@ import importlib
 import importlib.util
 import json
 import sys
-import time
 import zlib
 from pathlib import Path
 
 import numpy as np
 
-from opend_mj.evaluation.episode import EpisodeJob, record_fields
+from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.grading import failure_stage
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder
 from opend_mj.evaluation.runner import (
-    error_record,
     instruction_for,
-    make_episode_env,
     run_episode_group,
 )
 from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, agent_name
@@ -122,25 +119,14 @@ def run_group(jobs) -> list[dict]:
 
 
 def run_agent_group(jobs) -> list[dict]:
-    """Like `runner.run_episode_group`, with the agent of the jobs' ``policy`` acting."""
-    records, env = [], None
-    for job in jobs:
-        t0 = time.perf_counter()
-        try:
-            agent = load_agent(job.policy, job.policy_args)
-            if env is None:
-                env = make_episode_env(job)
-            else:
-                env.task.set_target(job.joint, instruction_for(job))
-            record = run_agent_episode(job, env, agent)
-        except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
-            record = error_record(job, exc)
-        out = {**record_fields(job), **record, "policy": job.policy}
-        out["wall_seconds"] = round(time.perf_counter() - t0, 3)
-        records.append(out)
-        if out.get("failed_stage") == "physics" or "error" in out:
-            env = None
-    return records
+    """Like `runner.run_episode_group` (the same scene sharing and fresh scene after a failure), with
+    the agent of the jobs' ``policy`` acting."""
+    return run_episode_group(jobs, episode=_agent_episode)
+
+
+def _agent_episode(job: EpisodeJob, env) -> dict:
+    env.task.set_target(job.joint, instruction_for(job))
+    return run_agent_episode(job, env, load_agent(job.policy, job.policy_args))
 
 
 def run_agent_episode(job: EpisodeJob, env, agent) -> dict:

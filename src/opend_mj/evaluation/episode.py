@@ -52,6 +52,7 @@ EPISODE_FIELDS: tuple[EpisodeField, ...] = (
     EpisodeField("pull", "arc"),
     EpisodeField("paraphrase", 0, int, always=False, tag=lambda v: f"p{v}"),
     EpisodeField("physics_timestep", None, _rounded(9), in_scene=True, always=False, tag=lambda v: f"dt{v:.6g}"),
+    EpisodeField("policy", None, in_key=False, always=False, tag=None),
 )
 #: Fields that depend on the machine and the clock, not on the episode (left out when comparing runs).
 WALL_CLOCK_FIELDS = ("wall_seconds",)

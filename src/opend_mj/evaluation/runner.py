@@ -28,11 +28,14 @@ from opend_mj.evaluation.grading import failure_stage  # noqa: E402
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder  # noqa: E402
 
 
-def run_episode(job: EpisodeJob, env=None) -> dict:
-    """Run one episode; returns its record (never raises: errors become an ``error`` record)."""
+def run_episode(job: EpisodeJob, env=None, episode=None) -> dict:
+    """Run one episode; returns its record (never raises: errors become an ``error`` record).
+
+    ``episode(job, env) -> record``: who acts (default: the planner; `evaluation.agents` passes an
+    agent's episode)."""
     t0 = time.perf_counter()
     try:
-        record = _run_episode(job, env)
+        record = (episode or _run_episode)(job, env)
     except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
         record = error_record(job, exc)
     out = {**record_fields(job), **record}
@@ -40,12 +43,13 @@ def run_episode(job: EpisodeJob, env=None) -> dict:
     return out
 
 
-def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[dict]:
+def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob], episode=None) -> list[dict]:
     """Run episodes that share one `scene_key` on one scene, built once (the unit of work of a run).
 
     Building a scene (room, cabinet, hand, compile) costs about as much as simulating an episode;
     the episodes of one cabinet's targets differ only in the target and the instruction, and each
-    starts from a full reset, so their records are the same as with a scene each.
+    starts from a full reset, so their records are the same as with a scene each. ``episode``: as in
+    `run_episode`.
     """
     records = []
     env = None
@@ -58,10 +62,10 @@ def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob]) -> list[d
                 records.append({**error_record(job, exc), "wall_seconds": round(time.perf_counter() - t0, 3)})
                 continue
             build_s = time.perf_counter() - t0
-            rec = run_episode(job, env)
+            rec = run_episode(job, env, episode)
             rec["wall_seconds"] = round(rec["wall_seconds"] + build_s, 3)
         else:
-            rec = run_episode(job, env)
+            rec = run_episode(job, env, episode)
         records.append(rec)
         if rec.get("failed_stage") == "physics" or "error" in rec:
             env = None  # a diverged or failed episode: the next one gets a fresh scene
