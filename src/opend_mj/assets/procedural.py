@@ -38,7 +38,7 @@ from opend_mj.assets.layout import PARTNET_SCALE
 from opend_mj.language import LanguageConfig, LanguageInvalid, TargetLayout, describe
 
 #: Bumped whenever the generated geometry changes.
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 
 HANDLE_KINDS = ("bar", "arched", "knob")
 
@@ -64,6 +64,25 @@ class GeneratorConfig:
     height_range: tuple[float, float] = (0.3, 1.8)
     depth_range: tuple[float, float] = (0.3, 0.6)
     thickness_range: tuple[float, float] = (0.015, 0.020)
+    #: Handle population, matched to the real OpenD training cabinets as the planner measures them in
+    #: depth (``tools/handle_stats.py``; real 10th / 50th / 90th percentiles: bar thickness 6.6 / 12.3 /
+    #: 16.9 mm, stand-off gap 9.6 / 23.1 / 34.8 mm, bar length 57 / 154 / 542 mm, knobs 4 %, knob size
+    #: 37 / 41 / 44 mm). Generator 1 had 10-16 mm bars on 30-45 mm stand-offs, 8-30 cm long, 12 % knobs.
+    bar_diameter_range: tuple[float, float] = (0.005, 0.017)
+    bar_gap_range: tuple[float, float] = (0.008, 0.038)
+    #: Probabilities of (bar, arched, knob) per target type.
+    drawer_handle_kinds: tuple[float, float, float] = (0.70, 0.24, 0.06)
+    door_handle_kinds: tuple[float, float, float] = (0.70, 0.24, 0.06)
+    #: Share of straight bars that run most of their panel (long door pulls, full-width drawer bars).
+    long_bar_share: float = 0.35
+    long_bar_max: float = 0.80
+    short_bar_min: float = 0.05
+    #: Wide drawers (front wider than ``paired_pull_min_width``) carry two pulls, one per half, this often.
+    paired_pull_share: float = 0.35
+    paired_pull_min_width: float = 0.55
+    knob_cap_radius_range: tuple[float, float] = (0.017, 0.023)
+    #: Door handles sit this far (m) from the door's free edge (double doors: handles 3-12 cm apart).
+    door_handle_margin_range: tuple[float, float] = (0.015, 0.06)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -395,12 +414,14 @@ class HandleStyle:
     square: bool
     arch_style: str
     length_frac: float
+    long: bool = False
 
 
-def _handle_style(rng: np.random.Generator, target: str, kind: str | None = None) -> HandleStyle:
+def _handle_style(rng: np.random.Generator, cfg: GeneratorConfig, target: str,
+                  kind: str | None = None) -> HandleStyle:
     if kind is None:
-        p = [0.6, 0.22, 0.18] if target == "drawer" else [0.6, 0.2, 0.2]
-        kind = HANDLE_KINDS[rng.choice(3, p=p)]
+        p = cfg.drawer_handle_kinds if target == "drawer" else cfg.door_handle_kinds
+        kind = HANDLE_KINDS[rng.choice(3, p=list(p))]
     if kind == "knob":
         orient = "none"
     elif target == "drawer":
@@ -410,11 +431,12 @@ def _handle_style(rng: np.random.Generator, target: str, kind: str | None = None
     return HandleStyle(
         kind=kind,
         orientation=orient,
-        diameter=float(rng.uniform(0.010, 0.016)),
-        clearance=float(rng.uniform(0.030, 0.045)),
+        diameter=float(rng.uniform(*cfg.bar_diameter_range)),
+        clearance=float(rng.uniform(*cfg.bar_gap_range)),
         square=bool(rng.random() < 0.25),
         arch_style="u" if rng.random() < 0.5 else "trapezoid",
         length_frac=float(rng.uniform(0.0, 1.0)),
+        long=bool(rng.random() < cfg.long_bar_share),
     )
 
 
@@ -478,11 +500,11 @@ def _arched_pieces(c: np.ndarray, u: np.ndarray, z0: float, length: float, st: H
     return pieces
 
 
-def _knob_pieces(c: np.ndarray, z0: float, rng: np.random.Generator) -> list[Piece]:
+def _knob_pieces(c: np.ndarray, z0: float, rng: np.random.Generator, cfg: GeneratorConfig) -> list[Piece]:
     """Knob: stem and cap (optionally a thin rim plate against the panel)."""
     stem_r = float(rng.uniform(0.005, 0.007))
     stem_l = float(rng.uniform(0.018, 0.028))
-    cap_r = float(rng.uniform(0.0125, 0.02))
+    cap_r = float(rng.uniform(*cfg.knob_cap_radius_range))
     cap_t = float(rng.uniform(0.010, 0.016))
     x, y = float(c[0]), float(c[1])
     pieces: list[Piece] = [
@@ -494,8 +516,8 @@ def _knob_pieces(c: np.ndarray, z0: float, rng: np.random.Generator) -> list[Pie
     return pieces
 
 
-def _make_handle(rng: np.random.Generator, st: HandleStyle, panel_lo: np.ndarray, panel_hi: np.ndarray,
-                 center: np.ndarray) -> tuple[list[Piece], str, str]:
+def _make_handle(rng: np.random.Generator, cfg: GeneratorConfig, st: HandleStyle, panel_lo: np.ndarray,
+                 panel_hi: np.ndarray, center: np.ndarray) -> tuple[list[Piece], str, str]:
     """Handle pieces on the front face of a panel (box lo/hi) centred at ``center`` (x, y)."""
     z0 = float(panel_hi[2])
     pw, ph = float(panel_hi[0] - panel_lo[0]), float(panel_hi[1] - panel_lo[1])
@@ -509,9 +531,13 @@ def _make_handle(rng: np.random.Generator, st: HandleStyle, panel_lo: np.ndarray
             kind, orient = "knob", "none"
     c = np.array([center[0], center[1], z0])
     if kind == "knob":
-        return _knob_pieces(c, z0, rng), "knob", "none"
-    max_len = min(0.30, room, 0.7 * (pw if orient == "horizontal" else ph))
-    min_len = 0.10 if kind == "arched" else 0.08
+        return _knob_pieces(c, z0, rng, cfg), "knob", "none"
+    along = pw if orient == "horizontal" else ph
+    if kind == "bar" and st.long:
+        max_len = min(cfg.long_bar_max, room, 0.9 * along)
+    else:
+        max_len = min(0.30, room, 0.7 * along)
+    min_len = 0.10 if kind == "arched" else cfg.short_bar_min
     max_len = max(min_len, max_len)
     length = min_len + st.length_frac * (max_len - min_len)
     u = np.array([1.0, 0.0, 0.0]) if orient == "horizontal" else np.array([0.0, 1.0, 0.0])
@@ -582,18 +608,18 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
 
     place(layout.tree, x0 + t, x1 - t, y0 + plinth + t, y1 - t)
 
-    drawer_style = _handle_style(rng, "drawer")
+    drawer_style = _handle_style(rng, cfg, "drawer")
     if rng.random() < 0.7:  # usually one handle kind for the whole cabinet
-        door_style = _handle_style(rng, "door", drawer_style.kind)
+        door_style = _handle_style(rng, cfg, "door", drawer_style.kind)
         door_style.diameter, door_style.clearance, door_style.square = (
             drawer_style.diameter, drawer_style.clearance, drawer_style.square)
         door_style.arch_style = drawer_style.arch_style
     else:
-        door_style = _handle_style(rng, "door")
+        door_style = _handle_style(rng, cfg, "door")
     t_front = float(rng.uniform(0.016, 0.02))
     t_box = float(rng.uniform(0.010, 0.014))
     door_upper = float(rng.uniform(1.57, 2.0))
-    door_handle_margin = float(rng.uniform(0.03, 0.06))
+    door_handle_margin = float(rng.uniform(*cfg.door_handle_margin_range))
     door_handle_dy = float(rng.uniform(-0.25, 0.25))
     floor_y = y0
 
@@ -618,7 +644,16 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
             ]
             depth = zf - bz0
             centre = (lo + hi) / 2
-            pieces, kind, orient = _make_handle(rng, drawer_style, lo, hi, centre)
+            if hi[0] - lo[0] > cfg.paired_pull_min_width and rng.random() < cfg.paired_pull_share:
+                # two pulls, each centred on its half of the front (the pair is the drawer's handle)
+                pieces = []
+                for half_lo, half_hi in (((lo[0], lo[1]), (centre[0], hi[1])), ((centre[0], lo[1]), (hi[0], hi[1]))):
+                    hlo = np.array([half_lo[0], half_lo[1], lo[2]])
+                    hhi = np.array([half_hi[0], half_hi[1], hi[2]])
+                    part, kind, orient = _make_handle(rng, cfg, drawer_style, hlo, hhi, (hlo + hhi) / 2)
+                    pieces += part
+            else:
+                pieces, kind, orient = _make_handle(rng, cfg, drawer_style, lo, hi, centre)
             origin = (float(centre[0]), float(centre[1]), zf)
             tg = Target("drawer", "prismatic", (0.0, 0.0, 1.0), origin, float(rng.uniform(0.7, 0.9)) * depth,
                         [Visual("drawer_front", [Box(tuple(lo), tuple(hi))], front),
@@ -654,7 +689,7 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
             if st.orientation == "horizontal":
                 # horizontal bar starts near the free edge
                 hx = free_x + inward * (0.025 + 0.5 * min(0.3, 0.5 * (lx1 - lx0)))
-            pieces, kind, orient = _make_handle(rng, st, lo, hi, np.array([hx, hy, 0.0]))
+            pieces, kind, orient = _make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
             if orient == "horizontal":  # re-centre horizontally near the free edge with its real length
                 bl, bh = _bounds_of(pieces)
                 shift = (free_x + inward * 0.025) - (bh[0] if hinge == "left" else bl[0])
