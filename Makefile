@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate eval-real install system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate results eval-real install system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -20,6 +20,23 @@ evaluate: install
 		--cabinets $(CABINETS) --out $(QUICKSTART_OUT)/oracle_allegro_test.jsonl
 	$(BIN)/opend score $(QUICKSTART_OUT)/oracle_allegro_test.jsonl \
 		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
+
+## Every committed file under results/ from scratch (the README's tables come from these; about
+## 30 min on 2 cores): oracle and CLIPort with all four hands on the procedural test split, the
+## Shadow hand at light x 0.7 and with reworded instructions, and the 1/120 s physics step.
+HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
+RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
+results: install
+	rm -f results/oracle_test.jsonl results/oracle_test_dt120.jsonl results/oracle_test_light07.jsonl \
+		results/cliport_test.jsonl results/cliport_test_light07.jsonl results/cliport_test_paraphrase2.jsonl
+	$(RUN) $(HANDS) --solver oracle --out results/oracle_test.jsonl
+	$(RUN) $(HANDS) --solver oracle --physics-timestep 1/120 --out results/oracle_test_dt120.jsonl
+	$(RUN) $(HANDS) --solver cliport --out results/cliport_test.jsonl
+	$(RUN) --hand shadow --solver oracle --light-scale 0.7 --out results/oracle_test_light07.jsonl
+	$(RUN) --hand shadow --solver cliport --light-scale 0.7 --out results/cliport_test_light07.jsonl
+	$(RUN) --hand shadow --solver cliport --paraphrase 2 --out results/cliport_test_paraphrase2.jsonl
+	for f in oracle_test oracle_test_dt120 cliport_test; do \
+		$(BIN)/opend score results/$$f.jsonl --plot results/$$f.png > /dev/null; done
 
 ## Real cabinets: compile your PartNet-Mobility folder (SOURCE=..., optionally IDS=a,b,c), run the
 ## oracle planner with all four hands on every target, and score it. The build's hash split is the
