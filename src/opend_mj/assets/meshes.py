@@ -233,6 +233,8 @@ def fast_box(points: np.ndarray, hull: QHull | None = None, candidates: int = 4)
         fn, tri = hull.face_normals, hull.triangles
         for f in np.argsort(-hull.area_faces)[:8 * candidates]:
             n = fn[f]
+            if abs(float(n @ n) - 1.0) > 1e-6:
+                continue
             if any(abs(float(n @ m)) > 0.999 for m in normals[3:]):
                 continue
             normals.append(n)
@@ -252,6 +254,8 @@ def fast_box(points: np.ndarray, hull: QHull | None = None, candidates: int = 4)
         frames_d.append(d)
     n_all, d_all = np.vstack(frames_n), np.vstack(frames_d)
     e_all = _cross(n_all, d_all)
+    ok = np.abs(np.linalg.norm(e_all, axis=1) - 1.0) < 1e-6  # (a zero normal of a degenerate facet)
+    n_all, d_all, e_all = n_all[ok], d_all[ok], e_all[ok]
     rots = np.stack([d_all, e_all, n_all], axis=2)  # (frames, 3, 3): columns are the box axes
     local = np.einsum("vi,fij->fvj", verts, rots)
     lo, hi = local.min(axis=1), local.max(axis=1)
