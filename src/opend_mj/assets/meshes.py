@@ -850,8 +850,9 @@ def collision_hulls(
                 continue
             flat = len(pv) < 4 or 2 * float(np.min(fast_box(pv)[2])) < config.min_thickness
             if len(pv) < 4 or (flat and _covered(pv, pf, QHull(pv), tolerance / 4)):
-                # a lone triangle or a convex flat plate: one thickened plate, as it is
-                hull = to_hull(pv, hull_config, fast=True)
+                # a lone triangle or a convex flat plate: one thickened plate, as it is (by the exact
+                # path: procedural knob faces take it, and their compiled output stays as it was)
+                hull = to_hull(pv, hull_config)
                 if hull is not None:
                     hulls.append(hull)
                     stats.convex_pieces += 1
