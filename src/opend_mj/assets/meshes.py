@@ -531,10 +531,11 @@ def _split_volume(points: np.ndarray, min_thickness: float) -> float:
     return float(hull.volume) + 0.5 * min_thickness * float(hull.area)
 
 
-def _covered(vertices: np.ndarray, faces: np.ndarray, hull: QHull, tolerance: float) -> bool:
+def _covered(vertices: np.ndarray, faces: np.ndarray, hull: QHull | trimesh.Trimesh, tolerance: float) -> bool:
     """True if the piece's faces cover every facet plane of its hull (the hull is the piece itself)."""
-    normals = hull.face_normals
-    offsets = hull.offsets
+    exact = isinstance(hull, trimesh.Trimesh)  # (the flat-plate test: trimesh's hull and exact box, as before)
+    normals = np.asarray(hull.face_normals)
+    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center)) if exact else hull.offsets
     sign = np.where((normals[:, 0] < -1e-9) | ((np.abs(normals[:, 0]) <= 1e-9) & (normals[:, 1] < -1e-9)) |
                     ((np.abs(normals[:, 0]) <= 1e-9) & (np.abs(normals[:, 1]) <= 1e-9) & (normals[:, 2] < 0)), -1.0, 1.0)
     planes = np.column_stack([normals * sign[:, None], offsets * sign])
@@ -556,7 +557,8 @@ def _covered(vertices: np.ndarray, faces: np.ndarray, hull: QHull, tolerance: fl
         return True
     if not np.all(covered >= 0.995 * (hull_area / 2)):
         return False
-    flat = float(np.min(fast_box(hull.vertices, hull)[2])) * 2 <= tolerance
+    box = oriented_box(np.asarray(hull.vertices)) if exact else fast_box(hull.vertices, hull)
+    flat = float(np.min(box[2])) * 2 <= tolerance
     need = hull_area / 2 if flat else hull_area
     return bool(np.all(covered >= 0.995 * need))
 
@@ -848,8 +850,8 @@ def collision_hulls(
             if float(np.linalg.norm(np.ptp(pv, axis=0))) < config.min_piece_size:
                 stats.dropped_pieces += 1
                 continue
-            flat = len(pv) < 4 or 2 * float(np.min(fast_box(pv)[2])) < config.min_thickness
-            if len(pv) < 4 or (flat and _covered(pv, pf, QHull(pv), tolerance / 4)):
+            flat = len(pv) < 4 or 2 * float(np.min(oriented_box(pv)[2])) < config.min_thickness
+            if len(pv) < 4 or (flat and _covered(pv, pf, _hull(pv), tolerance / 4)):
                 # a lone triangle or a convex flat plate: one thickened plate, as it is (by the exact
                 # path: procedural knob faces take it, and their compiled output stays as it was)
                 hull = to_hull(pv, hull_config)
@@ -858,9 +860,11 @@ def collision_hulls(
                     stats.convex_pieces += 1
                 continue
             stats.decomposed_pieces += 1
-            for points in cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill,
-                                       cache_dir, memo, stats):
-                hull = to_hull(points, hull_config, fast=True)
+            split = cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill, cache_dir,
+                                 memo, stats)
+            for points in split:
+                # a piece that is one hull (e.g. a procedural knob face) compiles like a convex piece
+                hull = to_hull(points, hull_config, fast=len(split) > 1)
                 if hull is not None:
                     hulls.append(hull)
                     stats.split_hulls += 1
