@@ -25,7 +25,17 @@ from scipy.spatial import cKDTree
 from opend_mj.assets.config import CoacdParams, CompilerConfig
 
 #: Bump when `split_decompose` gives other hulls for the same input (invalidates its cache).
-SPLIT_VERSION = 1
+SPLIT_VERSION = 3
+
+#: Planar holes narrower than this (m) count as closed in the splitter (a board or a knob modelled
+#: without its hidden face); wider ones (a carcass opening) stay open.
+_CAP_WIDTH = 0.05
+
+#: Most surface points the splitter measures a piece's hulls against (its spacing grows beyond).
+_MAX_SURFACE_POINTS = 150000
+
+#: Points this close (m) to a cut plane lie on the face shared by the hulls on both sides of it.
+_PLANE_EPS = 1e-5
 
 
 class MeshError(ValueError):
@@ -161,6 +171,100 @@ def _hull(points: np.ndarray) -> trimesh.Trimesh:
     return trimesh.convex.convex_hull(points, qhull_options="QbB Pp QJ")
 
 
+class QHull:
+    """A convex hull straight from qhull (scipy), without trimesh's mesh processing.
+
+    What the splitter and the real-mesh path need: vertices, triangles, outward unit normals and plane
+    offsets (n . x <= offset inside), facet areas, area and volume, all in the input's coordinates.
+    """
+
+    def __init__(self, points: np.ndarray):
+        from scipy.spatial import ConvexHull
+
+        points = np.asarray(points, dtype=float)
+        try:
+            h = ConvexHull(points, qhull_options="QbB Pp QJ")  # (QbB: qhull's own figures are scaled)
+        except Exception:  # QbB refuses a set with no extent along an axis (an axis-aligned plate)
+            h = ConvexHull(points, qhull_options="Pp QJ")
+        self.vertices = points[np.sort(h.vertices)]
+        tri = points[h.simplices]
+        self.faces = h.simplices
+        self.triangles = tri
+        cross = _cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(cross, axis=1)
+        self.area_faces = 0.5 * norm
+        normals = cross / np.where(norm > 0, norm, 1.0)[:, None]
+        inner = self.vertices.mean(axis=0)
+        flip = np.einsum("ij,ij->i", normals, tri[:, 0] - inner) < 0
+        normals[flip] *= -1
+        self.face_normals = normals
+        self.offsets = np.einsum("ij,ij->i", normals, tri[:, 0])
+        self.area = float(self.area_faces.sum())
+        self.volume = float(np.einsum("ij,ij->i", normals, tri[:, 0] - inner) @ self.area_faces) / 3.0
+        self.points = points
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (n, 3) arrays (np.cross has a large per-call overhead)."""
+    return np.column_stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]])
+
+
+def fast_box(points: np.ndarray, hull: QHull | None = None, candidates: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A small oriented box (centre, rotation columns = box axes, half sizes), cheaply.
+
+    Like trimesh's `oriented_bounds` (one box face on a hull facet), but only over the principal axes
+    and the normals of the `candidates` largest hull facets, each with the in-plane directions of the
+    other candidates and of its facets' edges: exact for boxes and plates, close to the smallest box
+    otherwise, all frames in one vectorised pass.
+    """
+    points = np.asarray(points, dtype=float)
+    mean = points.mean(axis=0)
+    if hull is None and len(points) >= 4:
+        try:
+            hull = QHull(points)
+        except Exception:  # degenerate sets: principal axes alone
+            hull = None
+    verts = (hull.vertices if hull is not None else points) - mean
+    _, vecs = np.linalg.eigh(verts.T @ verts)
+    normals = [vecs[:, 0], vecs[:, 1], vecs[:, 2]]
+    edge_dirs: list[np.ndarray] = [np.zeros((0, 3))] * 3
+    if hull is not None:
+        fn, tri = hull.face_normals, hull.triangles
+        for f in np.argsort(-hull.area_faces)[:8 * candidates]:
+            n = fn[f]
+            if abs(float(n @ n) - 1.0) > 1e-6:
+                continue
+            if any(abs(float(n @ m)) > 0.999 for m in normals[3:]):
+                continue
+            normals.append(n)
+            same = np.flatnonzero(np.abs(fn @ n) > 0.999)[:8]
+            t = tri[same]
+            edge_dirs.append(np.vstack([t[:, 1] - t[:, 0], t[:, 2] - t[:, 1], t[:, 0] - t[:, 2]]))
+            if len(normals) == 3 + candidates:
+                break
+    normals_arr = np.array(normals)
+    frames_n, frames_d = [], []
+    for i, n in enumerate(normals_arr):
+        d = np.vstack([normals_arr, edge_dirs[i]])
+        d = d - np.outer(d @ n, n)
+        length = np.linalg.norm(d, axis=1)
+        d = d[length > 1e-9] / length[length > 1e-9, None]
+        frames_n.append(np.broadcast_to(n, d.shape))
+        frames_d.append(d)
+    n_all, d_all = np.vstack(frames_n), np.vstack(frames_d)
+    e_all = _cross(n_all, d_all)
+    ok = np.abs(np.linalg.norm(e_all, axis=1) - 1.0) < 1e-6  # (a zero normal of a degenerate facet)
+    n_all, d_all, e_all = n_all[ok], d_all[ok], e_all[ok]
+    rots = np.stack([d_all, e_all, n_all], axis=2)  # (frames, 3, 3): columns are the box axes
+    local = np.einsum("vi,fij->fvj", verts, rots)
+    lo, hi = local.min(axis=1), local.max(axis=1)
+    ext = hi - lo
+    k = int(np.argmin(np.prod(ext + 1e-6 * float(ext.max()), axis=1)))  # (flat sets: the smallest rectangle)
+    rot, lo, hi = rots[k], lo[k], hi[k]
+    return mean + rot @ ((lo + hi) / 2), rot, (hi - lo) / 2
+
+
 #: Recent `oriented_box` results by input bytes: the pipeline asks for the box of one point set more than
 #: once (a piece's flatness check, then `thicken`); the box is a pure function of the points.
 _BOX_MEMO: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
@@ -219,9 +323,9 @@ def is_convex_piece(vertices: np.ndarray, faces: np.ndarray, tolerance: float) -
     return bool(np.all(np.abs(closest) <= tolerance * scale))
 
 
-def thicken(points: np.ndarray, min_thickness: float) -> np.ndarray:
+def thicken(points: np.ndarray, min_thickness: float, box=None) -> np.ndarray:
     """Return hull points with a minimum extent of `min_thickness` along the thinnest box axis."""
-    centre, rot, half = oriented_box(points)
+    centre, rot, half = oriented_box(points) if box is None else box
     axis = int(np.argmin(half))
     if 2 * half[axis] >= min_thickness:
         return points
@@ -232,12 +336,18 @@ def thicken(points: np.ndarray, min_thickness: float) -> np.ndarray:
     return np.vstack([flat + offset, flat - offset])
 
 
-def to_hull(points: np.ndarray, config: CompilerConfig) -> Hull | None:
-    """Make one collision hull from a point set: thickened, and a box primitive when box-shaped."""
+def to_hull(points: np.ndarray, config: CompilerConfig, fast: bool = False) -> Hull | None:
+    """Make one collision hull from a point set: thickened, and a box primitive when box-shaped.
+
+    `fast` uses qhull and `fast_box` directly (the real-mesh path) instead of trimesh's hull and
+    exact oriented bounds (kept for convex pieces, so that procedural cabinets compile as before).
+    """
     if len(points) < 3:
         return None
     if float(np.linalg.norm(np.ptp(points, axis=0))) < config.min_piece_size:
         return None
+    if fast:
+        return _to_hull_fast(np.asarray(points, dtype=float), config)
     points = thicken(points, config.min_thickness)
     try:
         hull = _hull(points)
@@ -249,6 +359,29 @@ def to_hull(points: np.ndarray, config: CompilerConfig) -> Hull | None:
     if hull.volume > 0 and box_volume <= (1.0 + config.box_tolerance) * hull.volume:
         return Hull(vertices=hull.vertices, box=(centre, rot, half))
     return Hull(vertices=np.asarray(hull.vertices))
+
+
+def _to_hull_fast(points: np.ndarray, config: CompilerConfig) -> Hull | None:
+    try:
+        hull = QHull(points)
+        box = fast_box(points, hull)
+    except Exception:
+        hull, box = None, fast_box(points)
+    if 2 * float(np.min(box[2])) < config.min_thickness:
+        points = thicken(points, config.min_thickness, box)
+        try:
+            hull = QHull(points)
+        except Exception:
+            return None
+        box = fast_box(hull.vertices, hull)
+    if hull is None:
+        return None
+    centre, rot, half = box
+    half = np.maximum(half, config.min_thickness / 2)
+    box_volume = 8.0 * float(np.prod(half))
+    if hull.volume > 0 and box_volume <= (1.0 + config.box_tolerance) * hull.volume:
+        return Hull(vertices=hull.vertices, box=(centre, rot, half))
+    return Hull(vertices=hull.vertices)
 
 
 def coacd_decompose(
@@ -338,12 +471,41 @@ def _surface_points(vertices: np.ndarray, faces: np.ndarray, spacing: float, rng
     return np.vstack(pts)
 
 
-def _hull_points(points: np.ndarray, spacing: float, rng, cap: int = 20000) -> tuple[trimesh.Trimesh, np.ndarray]:
-    hull = _hull(points)
+def _grid_points(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
+    """Points covering a triangle soup: every surface point lies within spacing / sqrt(2) of one.
+
+    Per triangle, lines parallel to its longest edge `spacing` apart, each with points `spacing`
+    apart from end to end (slivers cost their length, not their length squared).
+    """
+    tri = vertices[faces]
+    edges = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]], axis=1)
+    lengths = np.linalg.norm(edges, axis=2)
+    k = np.argmax(lengths, axis=1)
+    rows = np.arange(len(tri))
+    a, b, c = tri[rows, k], tri[rows, (k + 1) % 3], tri[rows, (k + 2) % 3]
+    base = lengths[rows, k]
+    ab = b - a
+    area2 = np.linalg.norm(_cross(ab, c - a), axis=1)
+    height = np.where(base > 0, area2 / np.where(base > 0, base, 1.0), 0.0)
+    n_lines = np.ceil(height / spacing).astype(np.int64) + 1  # lines at v = j / (n_lines - 1), apex included
+    line_tri = np.repeat(rows, n_lines)
+    j = np.arange(len(line_tri)) - np.repeat(np.cumsum(n_lines) - n_lines, n_lines)
+    v = np.where(n_lines[line_tri] > 1, j / np.maximum(n_lines[line_tri] - 1, 1), 0.0)
+    start = a[line_tri] + v[:, None] * (c[line_tri] - a[line_tri])
+    end = b[line_tri] + v[:, None] * (c[line_tri] - b[line_tri])
+    n_pts = np.ceil((1 - v) * base[line_tri] / spacing).astype(np.int64) + 1
+    pt_line = np.repeat(np.arange(len(line_tri)), n_pts)
+    i = np.arange(len(pt_line)) - np.repeat(np.cumsum(n_pts) - n_pts, n_pts)
+    t = np.where(n_pts[pt_line] > 1, i / np.maximum(n_pts[pt_line] - 1, 1), 0.0)
+    return start[pt_line] + t[:, None] * (end[pt_line] - start[pt_line])
+
+
+def _hull_points(points: np.ndarray, spacing: float, rng, cap: int = 20000) -> tuple[QHull, np.ndarray]:
+    hull = QHull(points)
     area = float(hull.area)
     if area > 0 and area / spacing**2 > cap:
         spacing = float(np.sqrt(area / cap))
-    return hull, _surface_points(np.asarray(hull.vertices), np.asarray(hull.faces), spacing, rng)
+    return hull, _surface_points(hull.points, hull.faces, spacing, rng)
 
 
 def _slice(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, origin: np.ndarray):
@@ -363,16 +525,17 @@ def _split_volume(points: np.ndarray, min_thickness: float) -> float:
     if len(points) < 4:
         return 0.0
     try:
-        hull = _hull(points)
+        hull = QHull(points)
     except Exception:
         return 0.0
     return float(hull.volume) + 0.5 * min_thickness * float(hull.area)
 
 
-def _covered(vertices: np.ndarray, faces: np.ndarray, hull: trimesh.Trimesh, tolerance: float) -> bool:
+def _covered(vertices: np.ndarray, faces: np.ndarray, hull: QHull | trimesh.Trimesh, tolerance: float) -> bool:
     """True if the piece's faces cover every facet plane of its hull (the hull is the piece itself)."""
+    exact = isinstance(hull, trimesh.Trimesh)  # (the flat-plate test: trimesh's hull and exact box, as before)
     normals = np.asarray(hull.face_normals)
-    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center))
+    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center)) if exact else hull.offsets
     sign = np.where((normals[:, 0] < -1e-9) | ((np.abs(normals[:, 0]) <= 1e-9) & (normals[:, 1] < -1e-9)) |
                     ((np.abs(normals[:, 0]) <= 1e-9) & (np.abs(normals[:, 1]) <= 1e-9) & (normals[:, 2] < 0)), -1.0, 1.0)
     planes = np.column_stack([normals * sign[:, None], offsets * sign])
@@ -394,13 +557,15 @@ def _covered(vertices: np.ndarray, faces: np.ndarray, hull: trimesh.Trimesh, tol
         return True
     if not np.all(covered >= 0.995 * (hull_area / 2)):
         return False
-    flat = float(np.min(oriented_box(np.asarray(hull.vertices))[2])) * 2 <= tolerance
+    box = oriented_box(np.asarray(hull.vertices)) if exact else fast_box(hull.vertices, hull)
+    flat = float(np.min(box[2])) * 2 <= tolerance
     need = hull_area / 2 if flat else hull_area
     return bool(np.all(covered >= 0.995 * need))
 
 
-def _caps(vertices: np.ndarray, faces: np.ndarray, size: float) -> np.ndarray:
-    """Fan triangles closing open boundaries no wider than `size` (an open tube end, a missing cap)."""
+def _caps(vertices: np.ndarray, faces: np.ndarray, size: float, width: float = 0.0, flat: float = 0.0) -> np.ndarray:
+    """Fan triangles closing open boundaries no wider than `size` (an open tube end, a missing cap),
+    and planar ones (within `flat`) narrower than `width` in one direction (a board's missing edge face)."""
     edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     uniq, counts = np.unique(edges, axis=0, return_counts=True)
     boundary = uniq[counts == 1]
@@ -411,7 +576,12 @@ def _caps(vertices: np.ndarray, faces: np.ndarray, size: float) -> np.ndarray:
     out = []
     for bv, be in pieces(vertices[used], np.column_stack([local, local[:, 1]])):
         centre = bv.mean(axis=0)
-        if float(np.linalg.norm(bv - centre, axis=1).max()) <= size:
+        close = float(np.linalg.norm(bv - centre, axis=1).max()) <= size
+        if not close and width > 0 and len(bv) >= 3:
+            _, _, vt = np.linalg.svd(bv - centre, full_matrices=False)
+            local = (bv - centre) @ vt.T
+            close = float(np.ptp(local[:, 2])) <= flat and float(np.ptp(local[:, 1])) <= width
+        if close:
             out.append(np.stack([bv[be[:, 0]], bv[be[:, 1]], np.broadcast_to(centre, (len(be), 3))], axis=1))
     return np.concatenate(out) if out else np.zeros((0, 3, 3))
 
@@ -435,29 +605,31 @@ def split_decompose(
     import heapq
 
     rng = np.random.default_rng(0)
-    hull0 = _hull(vertices)
+    hull0 = QHull(vertices)
     if _covered(vertices, faces, hull0, tolerance / 4):
         return [np.asarray(hull0.vertices)], 0.0
+    box0 = fast_box(vertices, hull0)
     if fill_panels > 0:
-        thickness = 2 * float(np.min(oriented_box(vertices)[2]))
+        thickness = 2 * float(np.min(box0[2]))
         if min_thickness <= thickness <= fill_panels and _on_hull(vertices, hull0, tolerance):
             return [np.asarray(hull0.vertices)], 0.0
-    caps = _caps(vertices, faces, max(fill_panels, 0.03))
-    area = float(trimesh.Trimesh(vertices, faces, process=False).area)
-    spacing = max(tolerance / 2.0, float(np.sqrt(area / 30000.0)))
-    surface = [_surface_points(vertices, faces, spacing, rng)]
-    if len(caps):
-        cv = caps.reshape(-1, 3)
-        surface.append(_surface_points(cv, np.arange(len(cv)).reshape(-1, 3), spacing, rng))
-    tree = cKDTree(np.vstack(surface))
-    _, axes, _ = oriented_box(vertices)
-    axes = axes.T
+    caps = _caps(vertices, faces, max(fill_panels, 0.03), width=_CAP_WIDTH, flat=tolerance)
+    # The surface as points within spacing / sqrt(2) of every surface point: a hull point's distance to
+    # them exceeds its distance to the surface by at most that; where the surface is too large for
+    # tolerance / 2 spacing (over _MAX_SURFACE_POINTS), the acceptance allows for the coarser cover.
+    tri_v = np.vstack([vertices[faces]] + ([caps] if len(caps) else [])).reshape(-1, 3)
+    tri_f = np.arange(len(tri_v)).reshape(-1, 3)
+    area = float(0.5 * np.linalg.norm(_cross(tri_v[1::3] - tri_v[0::3], tri_v[2::3] - tri_v[0::3]), axis=1).sum())
+    spacing = max(tolerance / 2.0, float(np.sqrt(area / _MAX_SURFACE_POINTS)))
+    tree = cKDTree(_grid_points(tri_v, tri_f, spacing))
+    accept = tolerance + max(0.0, (spacing - tolerance / 2.0) / np.sqrt(2.0))
+    axes = box0[1].T
     done: list[np.ndarray] = []
     worst = 0.0
     heap: list = []
     counter = 0
 
-    def push(pv, pf):
+    def push(pv, pf, planes):
         nonlocal counter
         if float(np.linalg.norm(np.ptp(pv, axis=0))) < min_size or len(pv) < 4:
             return
@@ -465,16 +637,34 @@ def split_decompose(
             hull, samples = _hull_points(pv, tolerance, rng, cap=1500)
         except Exception:
             return
-        dist = tree.query(samples)[0]
-        k = int(np.argmax(dist))
-        heapq.heappush(heap, (-float(dist[k]), counter, pv, pf, hull, samples[k]))
+        # Hull facets on a cut plane are shared with the hull on the other side (inside the union of
+        # the hulls, not its boundary): their points are not measured against the surface.
+        for normal, offset in planes:
+            samples = samples[np.abs(samples @ normal - offset) > _PLANE_EPS]
+        if len(samples):
+            # within the tolerance the bounded query is all it takes; beyond it (the slow queries: a
+            # far point has many surface points around it) a few hundred points give the worst one
+            dist = tree.query(samples, distance_upper_bound=accept)[0]
+            out = np.flatnonzero(~np.isfinite(dist))
+            if len(out):
+                out = out[::-(-len(out) // 256)]
+                far_dist = tree.query(samples[out])[0]
+                k = int(out[int(np.argmax(far_dist))])
+                dev = float(far_dist.max())
+            else:
+                k = int(np.argmax(dist))
+                dev = float(dist[k])
+            far = samples[k]
+        else:
+            dev, far = 0.0, pv[0]
+        heapq.heappush(heap, (-dev, counter, pv, pf, hull, far, planes))
         counter += 1
 
-    push(vertices, faces)
+    push(vertices, faces, ())
     while heap:
-        negdev, _, pv, pf, hull, far = heapq.heappop(heap)
+        negdev, _, pv, pf, hull, far, planes = heapq.heappop(heap)
         dev = -negdev
-        if dev <= tolerance or len(done) + len(heap) + 2 > max_hulls:
+        if dev <= accept or len(done) + len(heap) + 2 > max_hulls:
             done.append(np.asarray(hull.vertices))
             worst = max(worst, dev)
             continue
@@ -496,23 +686,24 @@ def split_decompose(
                     continue
                 cost = _split_volume(a[0], min_thickness) + _split_volume(b[0], min_thickness)
                 if best is None or cost < best[0]:
-                    best = (cost, a, b)
+                    best = (cost, a, b, (axis, c))
         if best is None:
             done.append(np.asarray(hull.vertices))
             worst = max(worst, dev)
             continue
+        child_planes = planes + (best[3],)
         for cv, cf in (best[1], best[2]):
             wv, wf = weld(cv, cf, decimals=7)
             if len(wf):
                 for piece in pieces(wv, wf):
-                    push(*piece)
+                    push(*piece, child_planes)
     return done, worst
 
 
-def _on_hull(points: np.ndarray, hull: trimesh.Trimesh, tolerance: float) -> bool:
+def _on_hull(points: np.ndarray, hull: QHull, tolerance: float) -> bool:
     """True if every point lies within `tolerance` of the hull's boundary (none sits deep inside)."""
-    normals = np.asarray(hull.face_normals)
-    offsets = np.einsum("ij,ij->i", normals, np.asarray(hull.triangles_center))
+    normals = hull.face_normals
+    offsets = hull.offsets
     depth = offsets[None, :] - points @ normals.T  # >= 0 inside, per facet plane
     return bool(np.all(depth.min(axis=1) <= tolerance))
 
@@ -661,16 +852,19 @@ def collision_hulls(
                 continue
             flat = len(pv) < 4 or 2 * float(np.min(oriented_box(pv)[2])) < config.min_thickness
             if len(pv) < 4 or (flat and _covered(pv, pf, _hull(pv), tolerance / 4)):
-                # a lone triangle or a convex flat plate: one thickened plate, as it is
+                # a lone triangle or a convex flat plate: one thickened plate, as it is (by the exact
+                # path: procedural knob faces take it, and their compiled output stays as it was)
                 hull = to_hull(pv, hull_config)
                 if hull is not None:
                     hulls.append(hull)
                     stats.convex_pieces += 1
                 continue
             stats.decomposed_pieces += 1
-            for points in cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill,
-                                       cache_dir, memo, stats):
-                hull = to_hull(points, hull_config)
+            split = cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill, cache_dir,
+                                 memo, stats)
+            for points in split:
+                # a piece that is one hull (e.g. a procedural knob face) compiles like a convex piece
+                hull = to_hull(points, hull_config, fast=len(split) > 1)
                 if hull is not None:
                     hulls.append(hull)
                     stats.split_hulls += 1
