@@ -503,7 +503,8 @@ class Planner:
         if handle.kind == "knob":
             orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
         quat = orientation_for_handle(orientation)
-        if orientation == "horizontal" and (handle.centre[2] < cfg.flip_below or self._neighbour_above(shape)):
+        neighbour_above = result.target_kind == "door" and self._neighbour_above(shape)
+        if orientation == "horizontal" and (handle.centre[2] < cfg.flip_below or neighbour_above):
             quat = quat_mul(quat, yaw_quat(math.pi))  # fingers down (site frame: rotate about +z)
         flip_doors = cfg.flip_right_doors and (orientation == "vertical" or not cfg.horizontal_doors_unflipped)
         if result.target_kind == "door" and flip_doors and self.spec.hand_type != "parallel_gripper":
