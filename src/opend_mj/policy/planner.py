@@ -189,8 +189,6 @@ class PlannerConfig:
     #: doors: stop pulling once the site came back toward the cabinet (+x) this far (m) from the
     #: farthest it got (None: never)
     door_back_stop: float | None = 0.03
-    #: ... this far once the pull turned ``door_done_deg`` (a door past 90 degrees comes back)
-    door_back_stop_open: float = 0.10
     hinge_pull: bool = True
     hinge_radius_range: tuple = (0.12, 1.2)
     hinge_disagree_deg: float = 40.0
@@ -776,8 +774,7 @@ class Planner:
                 return "done"
             if door and cfg.door_back_stop is not None:
                 least_x = min(least_x, float(site[0]))
-                back_stop = cfg.door_back_stop if abs(state.turned) < cfg.door_done_deg else cfg.door_back_stop_open
-                if float(site[0]) - least_x > back_stop:
+                if float(site[0]) - least_x > cfg.door_back_stop:
                     # the handle swings back toward the cabinet: the door is at its stop (or beyond
                     # 90 degrees); pulling on would drag it shut
                     result.events.append({"door_back_stop": round(state.turned, 1)})
