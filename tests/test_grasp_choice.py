@@ -59,7 +59,7 @@ def _bar(thickness, gap, length=0.2, y=0.0, z=0.0, orientation="horizontal"):
     return bar, posts
 
 
-def _choose(hand, boxes, handle_box_world, instruction="top drawer"):
+def _choose(hand, boxes, handle_box_world, instruction="top drawer", kind="drawer", **config):
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import Observation, PlanResult, Planner, PlannerConfig
     from opend_mj.policy.solvers import get_solver
@@ -68,9 +68,9 @@ def _choose(hand, boxes, handle_box_world, instruction="top drawer"):
     view = _view()
     depth = _render(view, boxes)
     box = _box_of(view, *handle_box_world)
-    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), load_spec(hand), PlannerConfig())
+    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), load_spec(hand), PlannerConfig(**config))
     obs = Observation(rgb=None, depth=depth, instruction=instruction, camera_view=view)
-    result = PlanResult(stage_reached="locate", failed_stage=None, target_kind="drawer")
+    result = PlanResult(stage_reached="locate", failed_stage=None, target_kind=kind)
     handle = estimate_handle(box, depth, view, planner.config)
     shape = planner.perceive(handle, box, obs, result)
     grasp = planner.choose_grasp(handle, shape, obs, result)
@@ -143,3 +143,20 @@ def test_a_box_over_a_pair_of_pulls_becomes_the_nearer_pull():
     assert one_of_paired_handles(pair, bar) is None
     # bare panel: nothing to choose either
     assert one_of_paired_handles(pair, np.full((64, 128), 1.0)) is None
+
+
+@pytest.mark.parametrize("hand", ["allegro", "shadow"])
+def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
+    """Stacked doors whose bars meet at the seam (the neighbour's bar 6 cm above): the fingers point
+    down, away from the neighbour; without one they point up, whichever side the door hinges on."""
+    from opend_mj.transforms import quat_to_mat
+
+    high = {"flip_below": -1.0}  # the synthetic scene sits at z = 0: not a handle near the floor
+    bar, posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.0)
+    other, other_posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.06)
+    _, shape, grasp = _choose(hand, [bar, *posts, other, *other_posts], bar, "bottom right door", kind="door", **high)
+    assert shape.clear["up"] < 0.08 and shape.clear["down"] > 0.1
+    fingers = quat_to_mat(grasp.quat)[:, 1]  # the open fingers point along site +y
+    assert fingers[2] < -0.9
+    _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", **high)
+    assert quat_to_mat(alone.quat)[:, 1][2] > 0.9

@@ -147,6 +147,32 @@ def test_refine_box_snaps_to_the_handle_in_depth():
     assert refine_box_with_depth(HandleBox(127, 105, 133, 135), flat, view) == HandleBox(127, 105, 133, 135)
 
 
+def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
+    """With a hinge seen in depth, the pull direction is the circle's opening tangent at the grasp
+    site, wherever the site slid to along a horizontal bar (a radial slide changes nothing)."""
+    import math
+
+    from opend_mj.policy.planner import Planner, PlannerConfig, PlanResult, PullState
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.hands import load_spec
+
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), PlannerConfig())
+    planner._hinge = np.array([0.0, -0.5])  # hinge on the right (-y), handle 0.4 m from it
+    state = PullState(quat0=np.array([1.0, 0, 0, 0]))
+    result = PlanResult(stage_reached="pull", failed_stage=None)
+    planner._start_hinge_pull(state, np.array([-0.03, -0.1, 0.5]), result)
+    assert state.hinge is not None
+    t0, a0 = planner._hinge_tangent(state, np.array([-0.03, -0.1, 0.5]))
+    assert t0[0] < -0.99 and abs(a0) < 5.0  # straight out of the cabinet at first
+    th = math.radians(30)  # the door opened 30 degrees toward the hinge side (-y)
+    for radius in (0.4, 0.3):  # the hand slid 10 cm along the bar toward the hinge: same tangent
+        site = np.array([-radius * math.sin(th), -0.5 + radius * math.cos(th), 0.5])
+        t, ang = planner._hinge_tangent(state, site)
+        assert abs(ang) == pytest.approx(30.0, abs=1.0)
+        assert t[0] < 0 and t[1] < 0  # away from the cabinet and toward the hinge side
+        assert abs(float(t[:2] @ (site[:2] - planner._hinge))) < 1e-6  # tangent to the circle
+
+
 @pytest.mark.slow
 def test_regrasp_after_a_deliberate_miss_opens_the_drawer(planner_cabinets):
     """The first grasp closes 6 cm above the handle (on air): the touch sensors say nothing is held,

@@ -101,6 +101,10 @@ class PlannerConfig:
     release: bool = False
     #: doors named "right" in the instruction: dexterous fingers point to -y (toward the hinge)
     flip_right_doors: bool = True
+    #: ... only vertical bars: the fingers round a horizontal bar point up (down where a neighbour
+    #: closer than ``neighbour_clear`` (m) is above it and there is more room below)
+    horizontal_doors_unflipped: bool = True
+    neighbour_clear: float = 0.10
     #: single doors (no side in the instruction): infer the hinge side from the depth image
     infer_hinge: bool = True
     #: per hand type: the grip is lost when a finger joint moved this much (m) from where it closed on
@@ -179,6 +183,16 @@ class PlannerConfig:
     push_entry_fraction: float = 0.45
     push_radius_fraction: float = 0.85
     push_to_deg: float = 125.0
+    #: doors with a hinge seen in depth: pull along the circle about it (the tangent at the grasp
+    #: site, whatever the site slid to along a bar) instead of the observed motion direction; fall
+    #: back to the observed direction when the handle moves more than ``hinge_disagree_deg`` off it
+    #: doors: stop pulling once the site came back toward the cabinet (+x) this far (m) from the
+    #: farthest it got (None: never)
+    door_back_stop: float | None = 0.03
+    hinge_pull: bool = True
+    hinge_radius_range: tuple = (0.12, 1.2)
+    hinge_disagree_deg: float = 40.0
+    hinge_check_distance: float = 0.03
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -332,6 +346,12 @@ class PullState:
     travelled: float = 0.0
     track: list = field(default_factory=list)  # site positions while the grip held
     last_held: tuple | None = None  # (site pos, site quat) the last time the grip held
+    #: doors: the hinge (world x, y) the pull turns about, the handle's start angle about it and the
+    #: sense of opening (+1 / -1); None until a pull starts with a hinge seen in depth
+    hinge: np.ndarray | None = None
+    angle0: float = 0.0
+    sense: float = 0.0
+    opened: float = 0.0  # the largest door angle (deg) reached while the grip held
 
 
 class Planner:
@@ -483,9 +503,11 @@ class Planner:
         if handle.kind == "knob":
             orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
         quat = orientation_for_handle(orientation)
-        if orientation == "horizontal" and handle.centre[2] < cfg.flip_below:
+        neighbour_above = result.target_kind == "door" and self._neighbour_above(shape)
+        if orientation == "horizontal" and (handle.centre[2] < cfg.flip_below or neighbour_above):
             quat = quat_mul(quat, yaw_quat(math.pi))  # fingers down (site frame: rotate about +z)
-        if result.target_kind == "door" and cfg.flip_right_doors and self.spec.hand_type != "parallel_gripper":
+        flip_doors = cfg.flip_right_doors and (orientation == "vertical" or not cfg.horizontal_doors_unflipped)
+        if result.target_kind == "door" and flip_doors and self.spec.hand_type != "parallel_gripper":
             # Fingers point toward the hinge, so that the door's pull presses the handle into the finger
             # curl. The side comes from the instruction where it names one (double doors), else from
             # the depth image (single doors: the handle sits near the free edge).
@@ -509,6 +531,12 @@ class Planner:
         self._first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
+
+    def _neighbour_above(self, shape) -> bool:
+        """A horizontal bar with something close above it (a neighbour's handle seen in depth) and
+        more room below: the fingers point down, the hand's body stays clear of the neighbour."""
+        clear = shape.clear
+        return clear["up"] < self.config.neighbour_clear and clear["down"] > clear["up"] + 0.02
 
     def gripper_opening(self, pre: np.ndarray, orientation: str, shape, result: PlanResult) -> np.ndarray:
         """A parallel gripper opens no wider than the free space beside the handle allows (a
@@ -664,6 +692,9 @@ class Planner:
         last_touch = None
         direction = state.direction
         start_travel = state.travelled
+        if door:
+            self._start_hinge_pull(state, start, result)
+        least_x = float(start[0])
         for k in range(max_steps):
             if self._time_left(robot) <= 0.0:
                 return "done"
@@ -702,12 +733,26 @@ class Planner:
                     base_dir = state.base_dir
                     ang = math.degrees(math.atan2(base_dir[0] * cand[1] - base_dir[1] * cand[0],
                                                   float(base_dir @ cand)))
-                    if abs(ang) <= cfg.door_max_turn:
+                    if state.hinge is not None and state.sense * ang < -cfg.hinge_disagree_deg / 4 \
+                            and float(np.linalg.norm(site - start)) > cfg.hinge_check_distance:
+                        # the handle turns the other way round: the hinge seen in depth is wrong
+                        result.events.append({"hinge_pull_dropped": round(ang, 1)})
+                        state.hinge = None
+                    if state.hinge is None and abs(ang) <= cfg.door_max_turn:
                         direction = cand
                         state.direction = cand
                         state.turned = ang
                         yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
                         quat = turn_about_z(state.quat0, math.radians(yaw))
+            if door and state.hinge is not None:
+                tangent, ang = self._hinge_tangent(state, site)
+                if abs(ang) <= cfg.door_max_turn:
+                    direction = tangent
+                    state.direction = tangent
+                    state.turned = ang
+                    state.opened = max(state.opened, abs(ang))
+                    yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
+                    quat = turn_about_z(state.quat0, math.radians(yaw))
             pull_dir = direction
             if door and abs(state.turned) > 1.0 and cfg.pull_bias_deg:
                 b = math.radians(math.copysign(cfg.pull_bias_deg, state.turned))
@@ -727,9 +772,45 @@ class Planner:
                 state.travelled = max(state.travelled, start_travel + float(np.linalg.norm(site - start)))
             if state.travelled >= travel_max:
                 return "done"
+            if door and cfg.door_back_stop is not None:
+                least_x = min(least_x, float(site[0]))
+                if float(site[0]) - least_x > cfg.door_back_stop:
+                    # the handle swings back toward the cabinet: the door is at its stop (or beyond
+                    # 90 degrees); pulling on would drag it shut
+                    result.events.append({"door_back_stop": round(state.turned, 1)})
+                    return "done"
             if k > stall_n and float(np.linalg.norm(history[-1] - history[-1 - stall_n])) < cfg.stall_distance:
                 return "done"
         return "done"
+
+    def _start_hinge_pull(self, state: PullState, site: np.ndarray, result: PlanResult) -> None:
+        """Pull a door along the circle about the hinge seen in depth (kept across re-grasps)."""
+        cfg = self.config
+        seen = getattr(self, "_hinge", None)
+        if not cfg.hinge_pull or seen is None or state.sense != 0.0:
+            return
+        r = site[:2] - np.asarray(seen, float)
+        radius = float(np.linalg.norm(r))
+        if not (cfg.hinge_radius_range[0] <= radius <= cfg.hinge_radius_range[1]):
+            return
+        t = np.array([-r[1], r[0]]) / radius
+        if abs(t[0]) < 0.5:  # the handle is not beside its hinge in the door's plane
+            return
+        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
+        state.hinge = np.asarray(seen, float)
+        state.angle0 = math.atan2(r[1], r[0])
+        result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
+
+    def _hinge_tangent(self, state: PullState, site: np.ndarray) -> tuple[np.ndarray, float]:
+        """The opening tangent of the circle about the hinge through the site, and the door's angle
+        (deg, signed like the turn of the pull direction from -x)."""
+        r = site[:2] - state.hinge
+        norm = max(1e-6, float(np.linalg.norm(r)))
+        t = state.sense * np.array([-r[1], r[0]]) / norm
+        tangent = np.array([t[0], t[1], 0.0])
+        base = state.base_dir
+        ang = math.degrees(math.atan2(base[0] * t[1] - base[1] * t[0], float(base[0] * t[0] + base[1] * t[1])))
+        return tangent, ang
 
     def door_arc(self, state: PullState):
         """The door's hinge, the handle's radius, its start angle, the sense of opening and how far
