@@ -90,7 +90,8 @@ def test_thin_bar_close_to_the_panel_is_pinched(hand):
 @pytest.mark.parametrize("hand", ["allegro", "skeleton"])
 def test_wide_bar_with_room_behind_is_hooked(hand):
     bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
-    handle, shape, grasp = _choose(hand, [bar, *posts], bar)
+    # the synthetic scene sits at z = 0: not a handle near the floor
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift={})
     assert handle.kind == "bar"
     assert shape.thickness == pytest.approx(0.014, abs=0.005)
     assert shape.gap == pytest.approx(0.03, abs=0.008)
@@ -160,3 +161,18 @@ def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
     assert fingers[2] < -0.9
     _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", **high)
     assert quat_to_mat(alone.quat)[:, 1][2] > 0.9
+
+
+@pytest.mark.parametrize("hand", ["allegro", "shadow"])
+def test_a_bar_near_the_floor_is_grasped_from_above(hand):
+    """A door bar 6 cm above the floor: the grasp site goes above the bar, so that the open fingers
+    pointing down clear the floor; the same bar 30 cm up is grasped at its centre."""
+    from opend_mj.policy.planner import PlannerConfig
+
+    lift = PlannerConfig().low_handle_lift[hand]
+    low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
+    handle, _, low = _choose(hand, [low_bar, *low_posts], low_bar, "door", kind="door")
+    assert low.pos[2] == pytest.approx(handle.centre[2] + lift) and handle.centre[2] < 0.08
+    high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
+    handle, _, high = _choose(hand, [high_bar, *high_posts], high_bar, "door", kind="door")
+    assert high.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > 0.25

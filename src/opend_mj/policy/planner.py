@@ -125,6 +125,13 @@ class PlannerConfig:
     knob_size: float = 0.055
     #: horizontal handles lower than this (m) are grasped with the fingers pointing down
     flip_below: float = 0.2
+    #: handles lower than ``low_handle_height`` (m; a bar or knob a few cm above the floor): the grasp
+    #: site goes this much (m) above the handle's centre, per hand, so that the open fingers pointing
+    #: down clear the floor on the way in and close over the bar from above (tuned on the real train
+    #: part's 12 low handles: Shadow 4 -> 8 at 3 cm, Allegro 0 -> 5 at 6 cm; the Skeleton opens 8
+    #: without; the gripper's 20 cm body meets the floor whatever the lift, or the approach's pitch)
+    low_handle_height: float = 0.10
+    low_handle_lift: dict = field(default_factory=lambda: {"shadow": 0.03, "allegro": 0.06})
     #: largest half-thickness of a bar: the grip centre is the front seen in depth plus the measured
     #: half thickness, at most this (m)
     handle_radius: float = 0.007
@@ -502,6 +509,7 @@ class Planner:
         orientation = handle.orientation
         if handle.kind == "knob":
             orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
+        low = handle.centre[2] < cfg.low_handle_height
         quat = orientation_for_handle(orientation)
         neighbour_above = result.target_kind == "door" and self._neighbour_above(shape)
         if orientation == "horizontal" and (handle.centre[2] < cfg.flip_below or neighbour_above):
@@ -523,6 +531,10 @@ class Planner:
         style = self.grasp_style(handle, shape)
         depth = float(cfg.grasp_depth.get(style, cfg.grasp_depth.get(_STYLE_KIND[style], 0.0)))
         pos = handle.centre + np.array([depth, 0.0, 0.0])
+        lift = float(cfg.low_handle_lift.get(self.spec.name, 0.0))
+        if lift > 0.0 and low:
+            pos = pos + np.array([0.0, 0.0, lift])
+            result.events.append({"low_handle_lift": lift})
         pre = self.spec.pregrasp_profile(orientation)
         closed = self.closed_profile(orientation)
         if self.spec.hand_type == "parallel_gripper":
