@@ -224,3 +224,58 @@ def test_pretrained_weights_load_from_a_local_file(tmp_path):
     assert load_pretrained(model, path, "cliport", log=lambda s: None) > 50
     assert torch.equal(model.layer2[0].conv1.weight, ref.layer2[0].conv1.weight)
     assert torch.equal(model.stem[0].weight[:, :3], ref.conv1.weight)
+
+
+# --------------------------------------------------------------------------------------------------
+# Handle proposals from depth and the affordance map's choice among them (no torch, no rendering)
+# --------------------------------------------------------------------------------------------------
+
+
+def _front_view():
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # looking along +x
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), pos=np.array([-2.0, 0.0, 1.0]), rot=rot)
+
+
+def _cabinet_depth():
+    """A wall 1 m behind a cabinet front (2 m away, image columns 40-216, rows 40-216) with two bars
+    3 cm proud of it: a horizontal one at the top left, a vertical one at the bottom right."""
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[70:74, 60:110] = 1.97
+    depth[150:190, 180:184] = 1.97
+    return depth
+
+
+def test_handle_proposals_find_the_bars_and_not_the_cabinet_corners():
+    from opend_mj.policy.perception import handle_proposals
+
+    boxes = sorted(box for box, _ in handle_proposals(_cabinet_depth(), _front_view()))
+    assert len(boxes) == 2, boxes  # the two bars; not the cabinet's silhouette against the wall
+    (u0, v0, u1, v1), (a0, b0, a1, b1) = boxes
+    assert abs(u0 - 60) <= 1 and abs(u1 - 110) <= 1 and abs(v0 - 70) <= 1 and abs(v1 - 74) <= 1
+    assert abs(a0 - 180) <= 1 and abs(b0 - 150) <= 1 and abs(b1 - 190) <= 1
+    flat = np.full((256, 256), 2.0, np.float32)
+    assert handle_proposals(flat, _front_view()) == []
+    # a box 5 cm proud of the wall: its corners stand out of their neighbourhood's median, but they
+    # are corners of something far larger than a handle
+    block = np.full((256, 256), 2.05, np.float32)
+    block[60:200, 60:200] = 2.0
+    assert handle_proposals(block, _front_view()) == []
+
+
+def test_the_map_and_the_instruction_choose_among_proposals():
+    from opend_mj.policy.learned.affordance import choose_proposal
+    from opend_mj.policy.perception import handle_proposals
+
+    depth, view = _cabinet_depth(), _front_view()
+    proposals = handle_proposals(depth, view)
+    prob = np.zeros((256, 256), np.float32)
+    prob[60:80, 60:110] = 0.9  # the map is sure of the top-left bar ...
+    box = choose_proposal(prob, proposals, "door", depth, view)
+    assert box[0] < 128 and box[1] < 128
+    prob[150:190, 175:190] = 0.2  # ... and a little on the other: both plausible, the words decide
+    box = choose_proposal(prob, proposals, "bottom right door", depth, view)
+    assert box[0] > 128 and box[1] > 128
+    assert choose_proposal(prob, [], "door", depth, view) is None

@@ -287,3 +287,72 @@ def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance:
     if max(toward_left, toward_right) < 0.05 or abs(toward_left - toward_right) < 0.02:
         return None
     return "left" if toward_left > toward_right else "right"
+
+
+# --------------------------------------------------------------------------------------------------
+# Handle proposals from depth (for learned solvers: their map says which, depth says where exactly)
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ProposalConfig:
+    """Handles stand 1.5-8 cm proud of the panel they sit on: ``handle_proposals`` finds such groups.
+
+    A pixel is proud when it is between ``min_protrusion`` and ``max_protrusion`` nearer (world x)
+    than the median of its ``window``-pixel neighbourhood. A connected group of at least ``min_pixels``
+    is a proposal when a ring ``ring`` pixels wide around it lies mostly (``ring_fraction``) on a panel
+    just behind it (the silhouette corners of a cabinet against the room are not), and its extent
+    (m) is handle-like: at most ``max_short`` across and ``max_long`` along (a raised door panel's
+    frame is not). Tuned on the real train part of the OpenD cabinets and the procedural train split
+    (candidates hold the named handle in 93 % / 99 % of images, 3-4 per image)."""
+
+    window: int = 25
+    stride: int = 2
+    min_protrusion: float = 0.012
+    max_protrusion: float = 0.09
+    min_pixels: int = 3
+    ring: int = 4
+    ring_fraction: float = 0.6
+    max_short: float = 0.07
+    max_long: float = 0.95
+
+
+def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalConfig()) -> list[tuple]:
+    """Boxes (u0, v0, u1, v1) and pixel masks of the groups in ``depth`` that look like handles:
+    a list of (box, mask), mask a bool array over the box's pixels (rows v0:v1, columns u0:u1)."""
+    from scipy import ndimage
+
+    h, w = depth.shape
+    vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    d = np.where(np.isfinite(depth), depth, np.nanmax(depth[np.isfinite(depth)]) if np.isfinite(depth).any() else 0.0)
+    pts = view.backproject(uu.ravel(), vv.ravel(), d.ravel()).reshape(h, w, 3)
+    x = pts[..., 0]
+    # the panel: a median over the window, taken on a grid of every ``stride``-th pixel (25 x 25
+    # medians at every pixel cost ~1 s an image; on the grid 1/16 of it) and spread back
+    s = max(1, int(config.stride))
+    coarse = ndimage.median_filter(x[::s, ::s], size=max(3, config.window // s | 1))
+    panel = np.repeat(np.repeat(coarse, s, axis=0), s, axis=1)[:h, :w]
+    proud = (x < panel - config.min_protrusion) & (x > panel - config.max_protrusion)
+    labels, _ = ndimage.label(proud, structure=np.ones((3, 3), bool))
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(labels), 1):
+        if sl is None:
+            continue
+        mask = labels[sl] == k
+        if mask.sum() < config.min_pixels:
+            continue
+        if config.ring:
+            r = config.ring
+            v0, v1 = max(0, sl[0].start - r), min(h, sl[0].stop + r)
+            u0, u1 = max(0, sl[1].start - r), min(w, sl[1].stop + r)
+            own = labels[v0:v1, u0:u1] == k
+            ring = ndimage.binary_dilation(own, iterations=r) & ~own
+            front = float(np.median(x[sl][mask]))
+            behind = x[v0:v1, u0:u1][ring]
+            on_panel = (behind > front + config.min_protrusion / 2) & (behind < front + config.max_protrusion + 0.02)
+            if behind.size == 0 or on_panel.mean() < config.ring_fraction:
+                continue
+        p = pts[sl][mask]
+        short, long = sorted((float(np.ptp(p[:, 1])), float(np.ptp(p[:, 2]))))
+        if short > config.max_short or long > config.max_long:
+            continue
+        out.append(((sl[1].start, sl[0].start, sl[1].stop, sl[0].stop), mask))
+    return out

@@ -14,9 +14,17 @@ Model (:class:`AffordanceNet`):
   cross-entropy (positive weight for the rare handle pixels) against the instructed target's handle
   mask (from the training renders, dilated by one pixel).
 
-Inference (:class:`CLIPortSolver`): the handle centre is the probability-weighted centroid of the
-connected region above half the peak around the arg-max; the box is that region's bounding box
-(at least ``min_box`` px on each side); the orientation comes from the region's principal axis.
+Inference (:class:`CLIPortSolver`): by default the map chooses among the handles that depth
+proposes (:func:`opend_mj.policy.perception.handle_proposals`: groups standing 1.2-9 cm proud of a
+panel, handle-sized): each proposal scores the map's peak over its pixels (the map smoothed by
+``heat_sigma`` px); the proposals scoring at least ``plausible_fraction`` of the best are the
+plausible ones, and where the instruction names a position Algorithm 1's matching
+(:func:`opend_mj.policy.learned.detector.match_instruction`) picks among them, else the best
+scoring one is taken. The map says which handle is meant, depth where it is exactly. Without
+proposals (``proposals=False``, or none found) the handle centre is the probability-weighted
+centroid of the connected region above half the peak around the arg-max; the box is that region's
+bounding box (at least ``min_box`` px on each side); the orientation comes from the region's
+principal axis.
 """
 
 from __future__ import annotations
@@ -163,6 +171,29 @@ def target_mask(mask: np.ndarray, value: int, dilate: int = 1) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 
 
+def choose_proposal(prob: np.ndarray, proposals: list, instruction: str, depth: np.ndarray, view,
+                    plausible_fraction: float = 0.05, heat_sigma: float = 6.0) -> tuple | None:
+    """The box of the proposal the affordance map and the instruction name (see the module doc), or
+    None without proposals. ``proposals``: [(box (u0, v0, u1, v1), mask over the box), ...]."""
+    from scipy.ndimage import gaussian_filter
+
+    from opend_mj.language import describe_instruction
+    from opend_mj.policy.learned.detector import match_instruction
+
+    if not proposals:
+        return None
+    heat = gaussian_filter(prob.astype(np.float32), heat_sigma) if heat_sigma > 0 else prob
+    scores = np.array([float(heat[v0:v1, u0:u1][mask].max()) for (u0, v0, u1, v1), mask in proposals])
+    boxes = np.array([box for box, _ in proposals], float)
+    best = int(np.argmax(scores))
+    named = describe_instruction(instruction)
+    if not named.vertical and not named.horizontal:
+        return tuple(boxes[best])
+    plausible = np.nonzero(scores >= plausible_fraction * scores[best])[0]
+    i = match_instruction(boxes[plausible], instruction, depth, view, scores=scores[plausible])
+    return tuple(boxes[plausible[i]]) if i is not None else tuple(boxes[best])
+
+
 def map_to_box(prob: np.ndarray, rel: float = 0.5, min_box: float = 4.0):
     """(centre (u, v), box (u0, v0, u1, v1), orientation, peak) from a probability map (H, W)."""
     from scipy.ndimage import label
@@ -237,12 +268,18 @@ class CLIPortSolver:
     needs_ground_truth = False
 
     def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
-                 canonical: bool = True):
+                 canonical: bool = True, proposals: bool = True, plausible_fraction: float = 0.05,
+                 heat_sigma: float = 6.0):
         self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
         self.min_box = min_box
         #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
         #: so reworded instructions reach the model in the wording it was trained on.
         self.canonical = canonical
+        #: Choose among the handles depth proposes (see the module doc); tuned on the real train part
+        #: of the OpenD cabinets and the procedural train split.
+        self.proposals = proposals
+        self.plausible_fraction = plausible_fraction
+        self.heat_sigma = heat_sigma
         self.last_map: np.ndarray | None = None
 
     def solve(self, rgb, depth, instruction, camera_view):
@@ -254,6 +291,13 @@ class CLIPortSolver:
         prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
         self.last_map = prob
         _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
+        if self.proposals and camera_view is not None:
+            from opend_mj.policy.perception import handle_proposals
+
+            chosen = choose_proposal(prob, handle_proposals(depth, camera_view), instruction, depth, camera_view,
+                                     self.plausible_fraction, self.heat_sigma)
+            if chosen is not None:
+                return HandleBox(*chosen, orientation=None, score=peak)
         return HandleBox(*box, orientation=orientation, score=peak)
 
 
