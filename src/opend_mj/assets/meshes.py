@@ -709,6 +709,8 @@ def split_decompose(
                 done.append([pv, pf, hull, planes, shared, dev, far])
                 continue
             best = None
+            # the surface point nearest the farthest hull point: the bottom of the concavity it bridges
+            near = tree.data[tree.query(far)[1]]
             for axis in axes:
                 t = pv @ axis
                 lo, hi = float(t.min()), float(t.max())
@@ -718,6 +720,9 @@ def split_decompose(
                 tk = float(far @ axis)
                 if lo + 0.1 * (hi - lo) < tk < hi - 0.1 * (hi - lo):
                     cuts.append(tk)
+                tn = float(near @ axis)
+                if lo + min_size <= tn <= hi - min_size and all(abs(tn - c) > 1e-6 for c in cuts):
+                    cuts.append(tn)
                 for c in cuts:
                     origin = axis * c
                     a = _slice(pv, pf, axis, origin)
