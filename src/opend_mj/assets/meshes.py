@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from opend_mj.assets.config import CoacdParams, CompilerConfig
 
 #: Bump when `split_decompose` gives other hulls for the same input (invalidates its cache).
-SPLIT_VERSION = 4
+SPLIT_VERSION = 5
 
 #: Planar holes narrower than this (m) count as closed in the splitter (a board or a knob modelled
 #: without its hidden face); wider ones (a carcass opening) stay open.
