@@ -103,3 +103,101 @@ def test_a_drawer_behind_a_door_is_checked_with_the_door_opened_first():
     drawer = next(d for d in check.drives if d.joint == "drawer")
     assert drawer.opened_first == ["door"] and drawer.ok(), (alone, drawer)
     assert check.ok, check.failures
+
+
+# --------------------------------------------------------------------------------------------------
+# Handle pieces through `collision_hulls`: the hulls follow the handle's surface within 1 mm
+
+
+def _hull_meshes(hulls) -> list[trimesh.Trimesh]:
+    out = []
+    for h in hulls:
+        if h.box is not None:
+            centre, rot, half = h.box
+            corners = trimesh.creation.box(extents=2 * half).vertices @ rot.T + centre
+            out.append(trimesh.convex.convex_hull(corners))
+        else:
+            out.append(trimesh.convex.convex_hull(h.vertices))
+    return out
+
+
+def _standoff(hulls, surface: trimesh.Trimesh) -> float:
+    """Largest distance from the boundary of the union of the hulls to the surface (as the fidelity
+    metric measures it: points inside another hull, or on a face shared with one, are not boundary)."""
+    from opend_mj.assets.fidelity import _inside_any
+
+    meshes = _hull_meshes(hulls)
+    worst = 0.0
+    for k, m in enumerate(meshes):
+        pts, _ = trimesh.sample.sample_surface(m, 3000, seed=k)
+        pts = np.vstack([pts, m.vertices])
+        pts = pts[~_inside_any(pts, meshes, skip=k, tol=2e-5)]
+        if len(pts):
+            worst = max(worst, float(trimesh.proximity.closest_point(surface, pts)[1].max()))
+    return worst
+
+
+def _inside(points: np.ndarray, hulls) -> np.ndarray:
+    from opend_mj.assets.fidelity import _inside_any
+
+    return np.array([_inside_any(p[None], _hull_meshes(hulls))[0] for p in points])
+
+
+def _c_bar(thickness: float = 0.012) -> trimesh.Trimesh:
+    """A closed C-shaped bar handle: a 120 x 10 mm bar on two 25 mm posts (the door is at x = 35 mm)."""
+    from shapely.geometry import Polygon
+
+    u = Polygon([(0, 0), (0.035, 0), (0.035, 0.01), (0.01, 0.01), (0.01, 0.11), (0.035, 0.11), (0.035, 0.12),
+                 (0, 0.12)])
+    return trimesh.creation.extrude_polygon(u, thickness)
+
+
+def test_a_bar_handle_keeps_its_gap_and_its_solid_within_1_mm():
+    from opend_mj.assets.config import CompilerConfig
+    from opend_mj.assets.meshes import DecompositionStats, collision_hulls
+
+    bar = _c_bar()
+    stats = DecompositionStats()
+    hulls = collision_hulls(np.asarray(bar.vertices), np.asarray(bar.faces), CompilerConfig(), None, stats,
+                            handle=True)
+    assert stats.decomposed_pieces == 1 and len(hulls) <= 8, (stats, len(hulls))
+    assert _standoff(hulls, bar) <= 0.001
+    # the gap between bar and door is free for fingers; the bar and posts are solid
+    gap = np.array([[x, y, 0.006] for x in (0.012, 0.02, 0.033) for y in (0.015, 0.06, 0.105)])
+    assert not _inside(gap, hulls).any()
+    solid = np.array([[0.005, 0.06, 0.006], [0.02, 0.005, 0.006], [0.02, 0.115, 0.006]])
+    assert _inside(solid, hulls).all()
+
+
+def test_a_handle_modelled_without_a_face_is_cut_as_a_solid():
+    """The bar without the faces of its posts against the door (PartNet often leaves a hidden face out):
+    the open faces are closed and every cut section too, so the hulls stay solid instead of falling
+    apart into thin walls (which left the inside empty and stood off both sides of every wall)."""
+    from opend_mj.assets.config import CompilerConfig
+    from opend_mj.assets.meshes import collision_hulls
+
+    bar = _c_bar()
+    back = np.abs(bar.triangles_center[:, 0] - 0.035) < 1e-9
+    assert back.sum() == 4
+    v, f = weld(np.asarray(bar.vertices), np.asarray(bar.faces)[~back])
+    hulls = collision_hulls(v, f, CompilerConfig(), None, handle=True)
+    assert _standoff(hulls, bar) <= 0.001
+    solid = np.array([[0.005, 0.06, 0.006], [0.02, 0.005, 0.006], [0.02, 0.115, 0.006]])
+    assert _inside(solid, hulls).all()
+    gap = np.array([[x, y, 0.006] for x in (0.012, 0.02, 0.033) for y in (0.015, 0.06, 0.105)])
+    assert not _inside(gap, hulls).any()
+
+
+def test_a_thin_handle_flange_stays_within_1_mm():
+    """A 0.5 mm flange on a block: its hull is thickened to handle_split_thickness (1 mm), not to the
+    4 mm of flat plates, so it stands 0.25 mm off each face instead of 1.75 mm."""
+    from shapely.geometry import Polygon
+
+    from opend_mj.assets.config import CompilerConfig
+    from opend_mj.assets.meshes import collision_hulls
+
+    shape = Polygon([(0, 0), (0.01, 0), (0.01, 0.01), (0.0005, 0.01), (0.0005, 0.04), (0, 0.04)])
+    piece = trimesh.creation.extrude_polygon(shape, 0.02)
+    hulls = collision_hulls(np.asarray(piece.vertices), np.asarray(piece.faces), CompilerConfig(), None,
+                            handle=True)
+    assert _standoff(hulls, piece) <= 0.001

@@ -67,11 +67,15 @@ class CompilerConfig:
     #: Largest distance (m) of a split hull from the visual surface: handles, everything else.
     handle_tolerance: float = 0.001
     surface_tolerance: float = 0.002
-    #: Flat handle pieces are thickened to this (m). 0.002 would keep them within handle_tolerance of
-    #: their plane; it stays at min_thickness so that procedural cabinets (flat knob faces) compile as before.
+    #: Flat handle pieces (one hull) are thickened to this (m). It stays at min_thickness so that
+    #: procedural cabinets (flat knob faces) compile as before.
     handle_min_thickness: float = 0.004
+    #: Hulls that the splitter cuts out of a non-convex handle piece are thickened to this (m): a thin
+    #: flange or slice then stands at most half of it off its surface (the 4 mm of min_thickness put
+    #: 2 mm on each side, twice handle_tolerance). MuJoCo accepts hulls of this thickness.
+    handle_split_thickness: float = 0.001
     #: Hull budget per non-convex piece (a piece that needs more keeps its last, larger hulls).
-    handle_max_hulls: int = 16
+    handle_max_hulls: int = 24
     max_hulls_per_piece: int = 6
     #: A body piece no thicker than this (m) whose vertices all lie on its hull is one solid panel
     #: (PartNet often models a board by its visible faces only).

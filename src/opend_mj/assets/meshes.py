@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from opend_mj.assets.config import CoacdParams, CompilerConfig
 
 #: Bump when `split_decompose` gives other hulls for the same input (invalidates its cache).
-SPLIT_VERSION = 3
+SPLIT_VERSION = 5
 
 #: Planar holes narrower than this (m) count as closed in the splitter (a board or a knob modelled
 #: without its hidden face); wider ones (a carcass opening) stay open.
@@ -33,6 +33,10 @@ _CAP_WIDTH = 0.05
 
 #: Most surface points the splitter measures a piece's hulls against (its spacing grows beyond).
 _MAX_SURFACE_POINTS = 150000
+
+
+#: Surface points per hull when the splitter compares candidate cuts by deviation (1500 for the hulls kept).
+_CANDIDATE_POINTS = 600
 
 #: Points this close (m) to a cut plane lie on the face shared by the hulls on both sides of it.
 _PLANE_EPS = 1e-5
@@ -594,6 +598,7 @@ def split_decompose(
     max_hulls: int,
     min_size: float,
     fill_panels: float = 0.0,
+    by_deviation: bool = False,
 ) -> tuple[list[np.ndarray], float]:
     """Cut one welded, connected, non-convex piece into convex point sets within `tolerance` (m).
 
@@ -601,6 +606,9 @@ def split_decompose(
     (above `tolerance` only where the hull budget `max_hulls` ran out). Open boundaries narrower than
     `cap` (an open tube end) count as closed. `fill_panels` > 0 keeps, as one solid, a piece no thicker
     than that whose vertices all lie on its hull: a board modelled by some of its faces only.
+    Each cut is the one (across a box axis, at the middle or through the farthest hull point) whose
+    children's hulls have the least volume, or with `by_deviation` the least deviation from the surface
+    (ties: volume), which costs a measurement per candidate and follows bends and flares more closely.
     """
     import heapq
 
@@ -619,85 +627,190 @@ def split_decompose(
     # tolerance / 2 spacing (over _MAX_SURFACE_POINTS), the acceptance allows for the coarser cover.
     tri_v = np.vstack([vertices[faces]] + ([caps] if len(caps) else [])).reshape(-1, 3)
     tri_f = np.arange(len(tri_v)).reshape(-1, 3)
+    if len(caps):
+        # the caps become faces of the piece: a cut through a closed piece leaves closed children
+        vertices, faces = weld(tri_v, tri_f, decimals=7)
     area = float(0.5 * np.linalg.norm(_cross(tri_v[1::3] - tri_v[0::3], tri_v[2::3] - tri_v[0::3]), axis=1).sum())
     spacing = max(tolerance / 2.0, float(np.sqrt(area / _MAX_SURFACE_POINTS)))
     tree = cKDTree(_grid_points(tri_v, tri_f, spacing))
     accept = tolerance + max(0.0, (spacing - tolerance / 2.0) / np.sqrt(2.0))
     axes = box0[1].T
-    done: list[np.ndarray] = []
-    worst = 0.0
+    done: list[list] = []  # [pv, pf, hull, planes, shared samples, dev, far]
     heap: list = []
     counter = 0
 
-    def push(pv, pf, planes):
-        nonlocal counter
-        if float(np.linalg.norm(np.ptp(pv, axis=0))) < min_size or len(pv) < 4:
-            return
-        try:
-            hull, samples = _hull_points(pv, tolerance, rng, cap=1500)
-        except Exception:
-            return
-        # Hull facets on a cut plane are shared with the hull on the other side (inside the union of
-        # the hulls, not its boundary): their points are not measured against the surface.
-        for normal, offset in planes:
-            samples = samples[np.abs(samples @ normal - offset) > _PLANE_EPS]
-        if len(samples):
-            # within the tolerance the bounded query is all it takes; beyond it (the slow queries: a
-            # far point has many surface points around it) a few hundred points give the worst one
-            dist = tree.query(samples, distance_upper_bound=accept)[0]
-            out = np.flatnonzero(~np.isfinite(dist))
-            if len(out):
-                out = out[::-(-len(out) // 256)]
-                far_dist = tree.query(samples[out])[0]
-                k = int(out[int(np.argmax(far_dist))])
-                dev = float(far_dist.max())
-            else:
-                k = int(np.argmax(dist))
-                dev = float(dist[k])
-            far = samples[k]
-        else:
-            dev, far = 0.0, pv[0]
-        heapq.heappush(heap, (-dev, counter, pv, pf, hull, far, planes))
-        counter += 1
+    def measure(samples: np.ndarray) -> tuple[float, np.ndarray | None]:
+        if not len(samples):
+            return 0.0, None
+        # within the tolerance the bounded query is all it takes; beyond it (the slow queries: a
+        # far point has many surface points around it) a few hundred points give the worst one
+        dist = tree.query(samples, distance_upper_bound=accept)[0]
+        out = np.flatnonzero(~np.isfinite(dist))
+        if len(out):
+            out = out[::-(-len(out) // 256)]
+            far_dist = tree.query(samples[out])[0]
+            k = int(out[int(np.argmax(far_dist))])
+            return float(far_dist.max()), samples[k]
+        k = int(np.argmax(dist))
+        return float(dist[k]), samples[k]
 
-    push(vertices, faces, ())
-    while heap:
-        negdev, _, pv, pf, hull, far, planes = heapq.heappop(heap)
-        dev = -negdev
-        if dev <= accept or len(done) + len(heap) + 2 > max_hulls:
-            done.append(np.asarray(hull.vertices))
-            worst = max(worst, dev)
-            continue
-        best = None
-        for axis in axes:
-            t = pv @ axis
-            lo, hi = float(t.min()), float(t.max())
-            if hi - lo < 2 * min_size:
-                continue
-            cuts = [lo + 0.5 * (hi - lo)]
-            tk = float(far @ axis)
-            if lo + 0.1 * (hi - lo) < tk < hi - 0.1 * (hi - lo):
-                cuts.append(tk)
-            for c in cuts:
-                origin = axis * c
-                a = _slice(pv, pf, axis, origin)
-                b = _slice(pv, pf, -axis, origin)
-                if a is None or b is None:
-                    continue
-                cost = _split_volume(a[0], min_thickness) + _split_volume(b[0], min_thickness)
-                if best is None or cost < best[0]:
-                    best = (cost, a, b, (axis, c))
-        if best is None:
-            done.append(np.asarray(hull.vertices))
-            worst = max(worst, dev)
-            continue
-        child_planes = planes + (best[3],)
-        for cv, cf in (best[1], best[2]):
+    def hull_samples(pv, planes, cap=1500):
+        """The piece's hull and its surface points: those measured now, and those on a cut plane (shared
+        with the hulls on the other side, measured where no other hull covers them)."""
+        hull, samples = _hull_points(pv, tolerance, rng, cap=cap)
+        # Hull facets on a cut plane are shared with the hull on the other side (inside the union of
+        # the hulls, not its boundary): their points are measured where no hull on the other side
+        # covers them (a cross-section whose hull spans a concavity or a gap).
+        shared = np.zeros(len(samples), dtype=bool)
+        for normal, offset in planes:
+            side = 1.0 if float(np.median(pv @ normal)) >= offset else -1.0
+            shared |= side * (samples @ normal - offset) <= _PLANE_EPS
+        return hull, samples[~shared], samples[shared]
+
+    def cut(pv, pf, planes, axis, c, a, b, cap=1500):
+        """The pieces on both sides of a cut, each [pv, pf, hull, planes, shared, dev, far], and the
+        largest deviation among them."""
+        child_planes = planes + ((axis, c),)
+        sides = []
+        for cv, cf in (a, b):
+            # the cross-sections closed again: the walls of a solid stay one piece, whose hull is solid
             wv, wf = weld(cv, cf, decimals=7)
             if len(wf):
-                for piece in pieces(wv, wf):
-                    push(*piece, child_planes)
-    return done, worst
+                wv, wf = _close_section(wv, wf, axis, c)
+            out = []
+            for qv, qf in pieces(wv, wf) if len(wf) else []:
+                if float(np.linalg.norm(np.ptp(qv, axis=0))) < min_size or len(qv) < 4:
+                    continue
+                try:
+                    hull, free, shared = hull_samples(qv, child_planes, cap)
+                except Exception:
+                    continue
+                out.append([qv, qf, hull, child_planes, shared, free])
+            sides.append(out)
+        recs, worst_child = [], 0.0
+        for out in sides:
+            for qv, qf, hull, cplanes, shared, free in out:
+                dev, far = measure(free)
+                recs.append([qv, qf, hull, cplanes, shared, dev, qv[0] if far is None else far])
+                worst_child = max(worst_child, dev)
+        return recs, worst_child
+
+    def push(rec):
+        nonlocal counter
+        pv, pf, hull, planes, shared, dev, far = rec
+        heapq.heappush(heap, (-dev, counter, pv, pf, hull, far, planes, shared))
+        counter += 1
+
+    def run() -> None:
+        while heap:
+            negdev, _, pv, pf, hull, far, planes, shared = heapq.heappop(heap)
+            dev = -negdev
+            if dev <= accept or len(done) + len(heap) + 2 > max_hulls:
+                done.append([pv, pf, hull, planes, shared, dev, far])
+                continue
+            best = None
+            # the surface point nearest the farthest hull point: the bottom of the concavity it bridges
+            near = tree.data[tree.query(far)[1]]
+            for axis in axes:
+                t = pv @ axis
+                lo, hi = float(t.min()), float(t.max())
+                if hi - lo < 2 * min_size:
+                    continue
+                cuts = [lo + 0.5 * (hi - lo)]
+                tk = float(far @ axis)
+                if lo + 0.1 * (hi - lo) < tk < hi - 0.1 * (hi - lo):
+                    cuts.append(tk)
+                tn = float(near @ axis)
+                if lo + min_size <= tn <= hi - min_size and all(abs(tn - c) > 1e-6 for c in cuts):
+                    cuts.append(tn)
+                for c in cuts:
+                    origin = axis * c
+                    a = _slice(pv, pf, axis, origin)
+                    b = _slice(pv, pf, -axis, origin)
+                    if a is None or b is None:
+                        continue
+                    cost = _split_volume(a[0], min_thickness) + _split_volume(b[0], min_thickness)
+                    if by_deviation:  # the cut that leaves the smallest deviation (then volume), on fewer points
+                        cost = (round(cut(pv, pf, planes, axis, c, a, b, _CANDIDATE_POINTS)[1] / (tolerance / 4)), cost)
+                    if best is None or cost < best[0]:
+                        best = (cost, a, b, (axis, c))
+            if best is None:
+                done.append([pv, pf, hull, planes, shared, dev, far])
+                continue
+            for rec in cut(pv, pf, planes, *best[3], best[1], best[2])[0]:
+                push(rec)
+
+    try:
+        hull0s = hull_samples(vertices, ())
+        dev0, far0 = measure(hull0s[1])
+        push([vertices, faces, hull0s[0], (), hull0s[2], dev0, vertices[0] if far0 is None else far0])
+    except Exception:
+        return [np.asarray(hull0.vertices)], 0.0
+    run()
+    # Points on a cut plane that no other hull covers are on the boundary of the union: measure them,
+    # and cut again the hulls they put beyond the tolerance (while the budget lasts).
+    for _ in range(8):
+        redo = []
+        boxes = [(rec[2].vertices.min(axis=0) - 2 * _PLANE_EPS, rec[2].vertices.max(axis=0) + 2 * _PLANE_EPS)
+                 for rec in done]
+        for i, rec in enumerate(done):
+            open_ = rec[4]
+            for j, other in enumerate(done):
+                if not len(open_):
+                    break
+                lo, hi = boxes[j]
+                if j == i or np.any(open_.min(axis=0) > hi) or np.any(open_.max(axis=0) < lo):
+                    continue
+                h = other[2]
+                open_ = open_[(open_ @ h.face_normals.T - h.offsets).max(axis=1) > 2 * _PLANE_EPS]
+            dev, far = measure(open_)
+            if dev > rec[5]:
+                rec[5], rec[6] = dev, far
+                if dev > accept:
+                    redo.append(i)
+        if not redo or len(done) + 1 > max_hulls:
+            break
+        for i in sorted(redo, reverse=True):
+            pv, pf, hull, planes, shared, dev, far = done.pop(i)
+            heapq.heappush(heap, (-dev, counter, pv, pf, hull, far, planes, shared))
+            counter += 1
+        n_before = len(done) + len(heap)
+        run()
+        if len(done) <= n_before:  # nothing was cut again (the budget is spent)
+            break
+    worst = max((rec[5] for rec in done), default=0.0)
+    return [np.asarray(rec[2].vertices) for rec in done], worst
+
+
+def _close_section(vertices: np.ndarray, faces: np.ndarray, axis: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fan triangles over each connected run of open boundary edges that lies on the cut plane.
+
+    They lie inside the hull of their own vertices (the piece's hull is unchanged) and keep the walls
+    of a cut solid connected: without them a cut closed surface falls apart into open walls, each
+    taken as its own thin hull, and the solid between them is lost."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    boundary = uniq[counts == 1]
+    if not len(boundary):
+        return vertices, faces
+    on = np.abs(vertices @ axis - offset) <= 1e-6
+    boundary = boundary[on[boundary[:, 0]] & on[boundary[:, 1]]]
+    if len(boundary) < 3:
+        return vertices, faces
+    used, local = np.unique(boundary, return_inverse=True)
+    local = local.reshape(-1, 2)
+    new_v, new_f = [vertices], [faces]
+    n = len(vertices)
+    for group_v, group_e, group_used in pieces(np.arange(len(used), dtype=float)[:, None].repeat(3, axis=1),
+                                               np.column_stack([local, local[:, 1]]), return_index=True):
+        if len(group_e) < 3:
+            continue
+        ids = used[group_used]
+        centre = vertices[ids].mean(axis=0)
+        new_v.append(centre[None])
+        new_f.append(np.column_stack([ids[group_e[:, 0]], ids[group_e[:, 1]], np.full(len(group_e), n)]))
+        n += 1
+    return np.vstack(new_v), np.vstack(new_f)
 
 
 def _on_hull(points: np.ndarray, hull: QHull, tolerance: float) -> bool:
@@ -729,12 +842,14 @@ def cached_split(
     cache_dir: Path | None,
     memo: dict | None = None,
     stats: DecompositionStats | None = None,
+    by_deviation: bool = False,
 ) -> list[np.ndarray]:
     """`split_decompose`, cached on disk (and in `memo`) by piece shape, settings and SPLIT_VERSION."""
     import time
 
     stats = stats if stats is not None else DecompositionStats()
-    extra = repr((SPLIT_VERSION, tolerance, min_thickness, max_hulls, min_size, fill_panels))
+    extra = repr((SPLIT_VERSION, tolerance, min_thickness, max_hulls, min_size, fill_panels)
+                 + ((by_deviation,) if by_deviation else ()))
     key, shift = _piece_key(vertices, faces, extra)
     local = None
     if memo is not None and key in memo:
@@ -752,7 +867,7 @@ def cached_split(
     if local is None:
         start = time.perf_counter()
         hulls, worst = split_decompose(vertices - shift, faces, tolerance, min_thickness, max_hulls, min_size,
-                                       fill_panels)
+                                       fill_panels, by_deviation)
         stats.split_seconds += time.perf_counter() - start
         local = hulls
         if cache_file is not None:
@@ -837,11 +952,14 @@ def collision_hulls(
     # split into connected pieces, and each piece is cut into hulls that follow its surface.
     if handle:
         tolerance, thickness, budget = config.handle_tolerance, config.handle_min_thickness, config.handle_max_hulls
+        split_thickness = config.handle_split_thickness
         fill = 0.0
     else:
         tolerance, thickness, budget = config.surface_tolerance, config.min_thickness, config.max_hulls_per_piece
+        split_thickness = thickness
         fill = config.fill_panels
     hull_config = config if thickness == config.min_thickness else _with_thickness(config, thickness)
+    split_config = config if split_thickness == config.min_thickness else _with_thickness(config, split_thickness)
     for g in np.unique(pg_all):
         sel = pg_all == g
         used, local = np.unique(pf_all[sel], return_inverse=True)
@@ -860,11 +978,12 @@ def collision_hulls(
                     stats.convex_pieces += 1
                 continue
             stats.decomposed_pieces += 1
-            split = cached_split(pv, pf, tolerance, thickness, budget, config.min_piece_size, fill, cache_dir,
-                                 memo, stats)
+            split = cached_split(pv, pf, tolerance, split_thickness, budget, config.min_piece_size, fill, cache_dir,
+                                 memo, stats, by_deviation=handle)
             for points in split:
                 # a piece that is one hull (e.g. a procedural knob face) compiles like a convex piece
-                hull = to_hull(points, hull_config, fast=len(split) > 1)
+                hull = to_hull(points, hull_config, fast=False) if len(split) == 1 else \
+                    to_hull(points, split_config, fast=True)
                 if hull is not None:
                     hulls.append(hull)
                     stats.split_hulls += 1
