@@ -46,12 +46,16 @@ def test_missing_detection_falls_back_to_nearest_rank():
     assert match_instruction(boxes, "top drawer") == 0
 
 
-def test_metric_matching_with_depth_and_camera():
+def _front_view():
+    """A camera at x = -2 looking along +x (right = -y, up = +z, backward = -x), 256 x 256, 45 degrees."""
     from opend_mj.sim.camera import CameraIntrinsics, CameraView
 
-    # camera at x = -2 looking along +x (right = -y, up = +z, backward = -x)
     rot = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), pos=np.array([-2.0, 0.0, 1.0]), rot=rot)
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), pos=np.array([-2.0, 0.0, 1.0]), rot=rot)
+
+
+def test_metric_matching_with_depth_and_camera():
+    view = _front_view()
     depth = np.full((256, 256), 2.0, np.float32)
     boxes = [_box(128, 80), _box(128, 128), _box(128, 176)]
     assert match_instruction(boxes, "top drawer", depth, view) == 0
@@ -229,13 +233,6 @@ def test_pretrained_weights_load_from_a_local_file(tmp_path):
 # --------------------------------------------------------------------------------------------------
 # Handle proposals from depth and the affordance map's choice among them (no torch, no rendering)
 # --------------------------------------------------------------------------------------------------
-
-
-def _front_view():
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
-
-    rot = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # looking along +x
-    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), pos=np.array([-2.0, 0.0, 1.0]), rot=rot)
 
 
 def _cabinet_depth():

@@ -140,7 +140,7 @@ def _standoff(hulls, surface: trimesh.Trimesh) -> float:
 def _inside(points: np.ndarray, hulls) -> np.ndarray:
     from opend_mj.assets.fidelity import _inside_any
 
-    return np.array([_inside_any(p[None], _hull_meshes(hulls))[0] for p in points])
+    return _inside_any(points, _hull_meshes(hulls))
 
 
 def _c_bar(thickness: float = 0.012) -> trimesh.Trimesh:

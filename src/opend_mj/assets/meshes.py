@@ -771,9 +771,7 @@ def split_decompose(
         if not redo or len(done) + 1 > max_hulls:
             break
         for i in sorted(redo, reverse=True):
-            pv, pf, hull, planes, shared, dev, far = done.pop(i)
-            heapq.heappush(heap, (-dev, counter, pv, pf, hull, far, planes, shared))
-            counter += 1
+            push(done.pop(i))
         n_before = len(done) + len(heap)
         run()
         if len(done) <= n_before:  # nothing was cut again (the budget is spent)

@@ -294,7 +294,7 @@ def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view, tolerance:
 # --------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ProposalConfig:
-    """Handles stand 1.5-8 cm proud of the panel they sit on: ``handle_proposals`` finds such groups.
+    """Handles stand 1.2-9 cm proud of the panel they sit on: ``handle_proposals`` finds such groups.
 
     A pixel is proud when it is between ``min_protrusion`` and ``max_protrusion`` nearer (world x)
     than the median of its ``window``-pixel neighbourhood. A connected group of at least ``min_pixels``

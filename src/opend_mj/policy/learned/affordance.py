@@ -290,14 +290,14 @@ class CLIPortSolver:
             instruction = canonical_instruction(instruction)
         prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
         self.last_map = prob
-        _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
         if self.proposals and camera_view is not None:
             from opend_mj.policy.perception import handle_proposals
 
             chosen = choose_proposal(prob, handle_proposals(depth, camera_view), instruction, depth, camera_view,
                                      self.plausible_fraction, self.heat_sigma)
             if chosen is not None:
-                return HandleBox(*chosen, orientation=None, score=peak)
+                return HandleBox(*chosen, orientation=None, score=float(prob.max()))
+        _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
         return HandleBox(*box, orientation=orientation, score=peak)
 
 
