@@ -259,12 +259,17 @@ def door_edges(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float
     on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
     start = int(np.clip(uc, 0, w - 1))
 
+    # the walk starts beside the handle: its own pixels (a knob is 10+ pixels wide) are not a gap
+    half = float(handle.size[0]) / 2 + 0.01
+    beside = np.abs(points[:, 1] - float(handle.centre[1])) > half
+    beside[~np.isfinite(points[:, 1])] = True
+
     def reach(step: int) -> float:
         col, misses, last = start, 0, start
         while 0 <= col < w and misses <= gap_pixels:
             if on_plane[col]:
                 last, misses = col, 0
-            else:
+            elif beside[col]:
                 misses += 1
             col += step
         return float(points[last, 1])

@@ -48,6 +48,7 @@ from opend_mj.sim.hands import (
     orientation_for_handle,
 )
 from opend_mj.transforms import (
+    axis_angle_quat,
     mat_to_quat,
     quat_axis_z,
     quat_mul,
@@ -129,9 +130,14 @@ class PlannerConfig:
     #: site goes this much (m) above the handle's centre, per hand, so that the open fingers pointing
     #: down clear the floor on the way in and close over the bar from above (tuned on the real train
     #: part's 12 low handles: Shadow 4 -> 8 at 3 cm, Allegro 0 -> 5 at 6 cm; the Skeleton opens 8
-    #: without; the gripper's 20 cm body meets the floor whatever the lift, or the approach's pitch)
+    #: without; the gripper's 21 cm body meets the floor whatever the lift: it pitches instead)
     low_handle_height: float = 0.10
     low_handle_lift: dict = field(default_factory=lambda: {"shadow": 0.03, "allegro": 0.06})
+    #: low horizontal bars: the approach is pitched down by this much (deg, per hand), from above and
+    #: in front, so that a body wide along the finger axis (the gripper's, 21 cm) clears the floor
+    #: below and the door behind. Tuned on the real train part (Franka: 150 -> 152-155 of 191 at
+    #: 35 deg; 20 deg: 152, 45: 151, 60-90: 152, the body then meets the door)
+    low_handle_pitch: dict = field(default_factory=lambda: {"franka": 35.0})
     #: largest half-thickness of a bar: the grip centre is the front seen in depth plus the measured
     #: half thickness, at most this (m)
     handle_radius: float = 0.007
@@ -531,6 +537,10 @@ class Planner:
         style = self.grasp_style(handle, shape)
         depth = float(cfg.grasp_depth.get(style, cfg.grasp_depth.get(_STYLE_KIND[style], 0.0)))
         pos = handle.centre + np.array([depth, 0.0, 0.0])
+        pitch = float(cfg.low_handle_pitch.get(self.spec.name, 0.0))
+        if pitch and low and orientation == "horizontal":
+            quat = quat_mul(axis_angle_quat((0.0, 1.0, 0.0), math.radians(pitch)), quat)
+            result.events.append({"low_handle_pitch": pitch})
         lift = float(cfg.low_handle_lift.get(self.spec.name, 0.0))
         if lift > 0.0 and low:
             pos = pos + np.array([0.0, 0.0, lift])
