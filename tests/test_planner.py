@@ -101,12 +101,13 @@ def test_target_kind_from_instruction():
     assert target_kind_from_instruction("drawer") == "drawer"
 
 
-@pytest.mark.parametrize("handle_y, panel, expected", [
-    (0.15, (-0.3, 0.2), "right"),   # handle near the left (+y) edge: the door hinges on the right
-    (-0.25, (-0.3, 0.2), "left"),   # handle near the right edge: hinged on the left
-    (-0.05, (-0.3, 0.2), None),     # handle in the middle: no verdict
+@pytest.mark.parametrize("handle_y, panel, expected, knob", [
+    (0.15, (-0.3, 0.2), "right", 0.0),   # handle near the left (+y) edge: the door hinges on the right
+    (-0.25, (-0.3, 0.2), "left", 0.0),   # handle near the right edge: hinged on the left
+    (-0.05, (-0.3, 0.2), None, 0.0),     # handle in the middle: no verdict
+    (0.14, (-0.3, 0.2), "right", 0.06),  # a 6 cm knob (12 pixels) seen in depth: the walk starts beside it
 ])
-def test_infer_hinge_side_from_depth(handle_y, panel, expected):
+def test_infer_hinge_side_from_depth(handle_y, panel, expected, knob):
     """A synthetic door plane: the hinge is on the side where the plane reaches farther."""
     from opend_mj.sim.camera import CameraIntrinsics, CameraView
     from opend_mj.policy.perception import HandleEstimate, infer_hinge_side
@@ -116,9 +117,14 @@ def test_infer_hinge_side_from_depth(handle_y, panel, expected):
     cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
     on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))  # points at depth 1
     inside = (on_plane[:, 1] > panel[0]) & (on_plane[:, 1] < panel[1]) & (np.abs(on_plane[:, 2]) < 0.3)
-    depth = np.where(inside, 1.0, 2.5).reshape(256, 256)
-    handle = HandleEstimate(centre=np.array([0.96, handle_y, 0.0]), orientation="vertical", kind="bar",
-                            size=(0.015, 0.2), front_x=0.953, panel_x=1.0)
+    depth = np.where(inside, 1.0, 2.5)
+    if knob:  # the knob stands 5 cm proud of the door
+        on_knob = (np.abs(on_plane[:, 1] - handle_y) < knob / 2) & (np.abs(on_plane[:, 2]) < knob / 2)
+        depth = np.where(on_knob, 0.95, depth)
+    depth = depth.reshape(256, 256)
+    size = (knob, knob) if knob else (0.015, 0.2)
+    handle = HandleEstimate(centre=np.array([0.96, handle_y, 0.0]), orientation="vertical",
+                            kind="knob" if knob else "bar", size=size, front_x=0.953 - 0.05 * bool(knob), panel_x=1.0)
     assert infer_hinge_side(handle, depth, view) == expected
 
 
