@@ -176,3 +176,20 @@ def test_a_bar_near_the_floor_is_grasped_from_above(hand):
     high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
     handle, _, high = _choose(hand, [high_bar, *high_posts], high_bar, "door", kind="door")
     assert high.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > 0.25
+
+
+def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
+    """The gripper's body is 21 cm wide along its finger axis: for a bar 6 cm above the floor it comes
+    from above and in front, pitched down, so that the body's lower end stays above the floor and its
+    upper end off the door; a bar 30 cm up is approached level."""
+    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.transforms import quat_to_mat
+
+    pitch = np.radians(PlannerConfig().low_handle_pitch["franka"])
+    low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
+    _, _, low = _choose("franka", [low_bar, *low_posts], low_bar, "door", kind="door")
+    approach = quat_to_mat(low.quat)[:, 2]
+    assert approach[2] == pytest.approx(-np.sin(pitch), abs=1e-6) and approach[0] > 0.5
+    high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
+    _, _, high = _choose("franka", [high_bar, *high_posts], high_bar, "door", kind="door")
+    assert quat_to_mat(high.quat)[:, 2] == pytest.approx([1.0, 0.0, 0.0], abs=1e-6)
