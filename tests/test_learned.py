@@ -276,3 +276,33 @@ def test_the_map_and_the_instruction_choose_among_proposals():
     box = choose_proposal(prob, proposals, "bottom right door", depth, view)
     assert box[0] > 128 and box[1] > 128
     assert choose_proposal(prob, [], "door", depth, view) is None
+
+
+def test_a_drawer_position_is_read_among_the_whole_stack():
+    """Three drawers with one handle design stacked in a column, and a door bar beside them; the map
+    favours the bottom drawer and barely sees the top one. "middle drawer" must still be the middle
+    one: the stack of a plausible drawer handle is plausible too (not the door's bar, of another size)."""
+    from opend_mj.policy.learned.affordance import choose_proposal, drawer_stack
+    from opend_mj.policy.perception import handle_proposals
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    for v in (70, 120, 170):  # drawer bars, 50 px wide
+        depth[v:v + 4, 60:110] = 1.97
+    depth[100:160, 180:184] = 1.97  # a door's vertical bar
+    view = _front_view()
+    proposals = handle_proposals(depth, view)
+    assert len(proposals) == 4
+    prob = np.zeros((256, 256), np.float32)
+    prob[165:180, 60:110] = 0.9  # bottom drawer: sure
+    prob[115:130, 60:110] = 0.5  # middle drawer: plausible
+    prob[65:80, 60:110] = 0.01  # top drawer: below 5 % of the best
+    box = choose_proposal(prob, proposals, "middle drawer", depth, view)
+    assert 115 <= (box[1] + box[3]) / 2 <= 130, box
+    # without the stack the two plausible drawers are all there is, and "middle" is lost among two
+    box = choose_proposal(prob, proposals, "middle drawer", depth, view, stack_drawers=False)
+    assert not 115 <= (box[1] + box[3]) / 2 <= 130, box
+    boxes = np.array([b for b, _ in proposals], float)
+    bottom = int(np.argmax((boxes[:, 1] + boxes[:, 3]) * (boxes[:, 0] < 128)))
+    stack = drawer_stack(boxes, {bottom})
+    assert len(stack) == 3 and all(boxes[i, 0] < 128 for i in stack)

@@ -20,7 +20,10 @@ panel, handle-sized): each proposal scores the map's peak over its pixels (the m
 ``heat_sigma`` px); the proposals scoring at least ``plausible_fraction`` of the best are the
 plausible ones, and where the instruction names a position Algorithm 1's matching
 (:func:`opend_mj.policy.learned.detector.match_instruction`) picks among them, else the best
-scoring one is taken. The map says which handle is meant, depth where it is exactly. Without
+scoring one is taken. For a drawer, the plausible set takes in the rest of each plausible
+handle's stack (`drawer_stack`): drawers stacked in a column carry the same handle, and a position
+such as "middle" or "second bottom" is only right among the whole stack, which the map's scores
+alone often cut short. The map says which handle is meant, depth where it is exactly. Without
 proposals (``proposals=False``, or none found) the handle centre is the probability-weighted
 centroid of the connected region above half the peak around the arg-max; the box is that region's
 bounding box (at least ``min_box`` px on each side); the orientation comes from the region's
@@ -171,8 +174,24 @@ def target_mask(mask: np.ndarray, value: int, dilate: int = 1) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 
 
+def drawer_stack(boxes: np.ndarray, members: set[int], column_px: float = 3.0, size_tolerance: float = 0.15) -> set[int]:
+    """``members`` and every box in the same image column as one of them (centres within
+    ``column_px``) with a handle of the same size (width and height within ``size_tolerance``, at
+    least 2 px): a stack of drawers with one handle design."""
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    cu = (boxes[:, 0] + boxes[:, 2]) / 2
+    w, h = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    stack = set(members)
+    for p in members:
+        same = (np.abs(cu - cu[p]) <= column_px) & (np.abs(w - w[p]) <= size_tolerance * np.maximum(w, w[p])) \
+            & (np.abs(h - h[p]) <= np.maximum(2.0, size_tolerance * np.maximum(h, h[p])))
+        stack.update(np.nonzero(same)[0].tolist())
+    return stack
+
+
 def choose_proposal(prob: np.ndarray, proposals: list, instruction: str, depth: np.ndarray, view,
-                    plausible_fraction: float = 0.05, heat_sigma: float = 6.0) -> tuple | None:
+                    plausible_fraction: float = 0.05, heat_sigma: float = 6.0,
+                    stack_drawers: bool = True) -> tuple | None:
     """The box of the proposal the affordance map and the instruction name (see the module doc), or
     None without proposals. ``proposals``: [(box (u0, v0, u1, v1), mask over the box), ...]."""
     from scipy.ndimage import gaussian_filter
@@ -190,6 +209,8 @@ def choose_proposal(prob: np.ndarray, proposals: list, instruction: str, depth: 
     if not named.vertical and not named.horizontal:
         return tuple(boxes[best])
     plausible = np.nonzero(scores >= plausible_fraction * scores[best])[0]
+    if stack_drawers and named.kind == "drawer":
+        plausible = np.array(sorted(drawer_stack(boxes, set(plausible.tolist()))))
     i = match_instruction(boxes[plausible], instruction, depth, view, scores=scores[plausible])
     return tuple(boxes[plausible[i]]) if i is not None else tuple(boxes[best])
 
