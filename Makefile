@@ -22,20 +22,22 @@ evaluate: install
 		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
 
 ## Every committed file under results/ from scratch (the README's tables come from these; about
-## 30 min on 2 cores): oracle and CLIPort with all four hands on the procedural test split, the
+## 30 min on 2 cores): oracle, CLIPort and Faster R-CNN with all four hands on the procedural test split, the
 ## Shadow hand at light x 0.7 and with reworded instructions, and the 1/120 s physics step.
 HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
 RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
 results: install
 	rm -f results/oracle_test.jsonl results/oracle_test_dt120.jsonl results/oracle_test_light07.jsonl \
-		results/cliport_test.jsonl results/cliport_test_light07.jsonl results/cliport_test_paraphrase2.jsonl
+		results/cliport_test.jsonl results/cliport_test_light07.jsonl results/cliport_test_paraphrase2.jsonl \
+		results/fasterrcnn_test.jsonl
 	$(RUN) $(HANDS) --solver oracle --out results/oracle_test.jsonl
 	$(RUN) $(HANDS) --solver oracle --physics-timestep 1/120 --out results/oracle_test_dt120.jsonl
 	$(RUN) $(HANDS) --solver cliport --out results/cliport_test.jsonl
+	$(RUN) $(HANDS) --solver fasterrcnn --out results/fasterrcnn_test.jsonl
 	$(RUN) --hand shadow --solver oracle --light-scale 0.7 --out results/oracle_test_light07.jsonl
 	$(RUN) --hand shadow --solver cliport --light-scale 0.7 --out results/cliport_test_light07.jsonl
 	$(RUN) --hand shadow --solver cliport --paraphrase 2 --out results/cliport_test_paraphrase2.jsonl
-	for f in oracle_test oracle_test_dt120 cliport_test; do \
+	for f in oracle_test oracle_test_dt120 cliport_test fasterrcnn_test; do \
 		$(BIN)/opend score results/$$f.jsonl --plot results/$$f.png > /dev/null; done
 
 ## Real cabinets: compile your PartNet-Mobility folder (SOURCE=..., optionally IDS=a,b,c), run the

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from opend_mj.policy.learned.detector import BACKBONES
+
 DEFAULT_DATA = Path("out/handle-data")
 
 
@@ -51,8 +53,9 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--resume", is_flag=True, help="Continue from the training state.")
 @click.option("--device", default=None, help="cpu / cuda [cuda when present].")
 @click.option("--threads", type=int, default=None, help="torch CPU threads.")
-@click.option("--backbone", type=click.Choice(["resnet50_fpn", "mobilenet_v3_large_fpn", "mobilenet_v3_large_320_fpn"]),
-              default="mobilenet_v3_large_320_fpn", show_default=True, help="fasterrcnn backbone.")
+@click.option("--backbone", type=click.Choice(list(BACKBONES)),
+              default="compact_fpn", show_default=True,
+              help="fasterrcnn backbone: the paper's three, or this project's compact_fpn (shipped).")
 @click.option("--box-head-dim", type=int, default=128, show_default=True, help="fasterrcnn box head (torchvision: 1024).")
 @click.option("--min-size", type=int, default=None, help="fasterrcnn input size (builder default if unset).")
 @click.option("--fusion-layers", type=click.Choice(["2", "3", "4"]), default="3", show_default=True)
