@@ -164,15 +164,17 @@ def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
 
 def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
-    from opend_mj.policy.learned.detector import DetectorConfig, FasterRCNNSolver, build_detector, detector_targets
+    from opend_mj.policy.learned.detector import (DetectorConfig, FasterRCNNSolver, build_detector, detector_input,
+                                                  detector_targets)
 
     out, _ = tiny_data
     torch.manual_seed(0)
-    cfg = DetectorConfig(min_size=160, max_size=160)
+    cfg = DetectorConfig(min_size=160, max_size=160, kinds=True, depth=True)
     model = build_detector(cfg)
     recs = load_records(out)[:1]
-    images = [torch.from_numpy(load_images(out, r)[0].copy()).permute(2, 0, 1).float() / 255 for r in recs]
-    targets = [detector_targets(r) for r in recs]
+    images = [detector_input(*load_images(out, r)[:2], cfg) for r in recs]
+    targets = [detector_targets(r, kinds=True) for r in recs]
+    assert set(targets[0]["labels"].tolist()) <= {1, 2}
     opt = torch.optim.AdamW(model.parameters(), lr=5e-4)
     model.train()
     losses = []
@@ -192,8 +194,8 @@ def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     solver = FasterRCNNSolver(checkpoint=ckpt, threshold=0.0)
     rgb, depth, _ = load_images(out, recs[0])
     box = solver.solve(rgb, depth, recs[0]["targets"][0]["instruction"], camera_view_of(recs[0]))
-    boxes, scores = solver.last_detections
-    assert boxes.ndim == 2 and boxes.shape[1] == 4 and scores.shape == (len(boxes),)
+    found = solver.last_detections
+    assert found.boxes.ndim == 2 and found.boxes.shape[1] == 4 and found.handle.shape == (len(found.boxes),)
     if box is not None:
         assert 0 <= box.u0 <= box.u1 <= 256
 
@@ -328,11 +330,95 @@ def test_the_shipped_detector_finds_the_handles_of_a_generated_image(tiny_data):
             if t["box"] is None:
                 continue
             box = solver.solve(rgb, depth, t["instruction"], camera_view_of(rec))
-            boxes, scores = solver.last_detections
-            kept = boxes[scores >= solver.threshold]
+            found_now = solver.last_detections
+            kept = found_now.boxes[found_now.handle >= solver.match.threshold]
             total += 1
             found += any(iou(b, t["box"]) >= 0.5 for b in kept)
             matched += box is not None and iou(box.as_tuple(), t["box"]) >= 0.5
     assert total >= 8
     assert found >= 0.6 * total, (found, total)
     assert matched >= 0.5 * total, (matched, total)
+
+
+# --------------------------------------------------------------------------------------------------
+# The detector solver's choice: kinds, depth proposals the head accepts (no torch)
+# --------------------------------------------------------------------------------------------------
+
+
+def _detections(boxes, handle, kind):
+    from opend_mj.policy.learned.detector import Detections
+
+    return Detections(np.array(boxes, float).reshape(-1, 4), np.array(handle, float),
+                      np.array(kind, float).reshape(len(handle), -1) if len(handle) else np.zeros((0, 2)))
+
+
+def test_a_drawer_is_ranked_among_drawers_only():
+    """Two drawers above two doors: with kinds, "top drawer" and "bottom drawer" are the two drawer
+    handles (ranked among all four handles, "bottom drawer" would be a door's)."""
+    from opend_mj.policy.learned.detector import MatchConfig, select_handle
+
+    boxes = [_box(128, 40), _box(128, 80), _box(90, 170, 4, 30), _box(166, 170, 4, 30)]
+    kind = [[0.9, 0.1], [0.8, 0.2], [0.1, 0.9], [0.2, 0.8]]
+    found = _detections(boxes, [0.95] * 4, kind)
+    cfg = MatchConfig(use_proposals=False)
+    assert np.allclose(select_handle(found, None, "bottom drawer", config=cfg)[0], boxes[1])
+    assert np.allclose(select_handle(found, None, "top drawer", config=cfg)[0], boxes[0])
+    assert np.allclose(select_handle(found, None, "left door", config=cfg)[0], boxes[2])
+    # a one-class detector cannot tell them apart: the lowest handle is taken for the bottom drawer
+    one = _detections(boxes, [0.95] * 4, [[1.0]] * 4)
+    assert not np.allclose(select_handle(one, None, "bottom drawer", config=cfg)[0], boxes[1])
+
+
+def test_a_depth_proposal_fills_a_missed_detection():
+    """Three stacked drawers, the middle one below the detection threshold: the depth proposal there
+    joins when the head calls it a handle, so "middle drawer" is the middle one (not the bottom)."""
+    from opend_mj.policy.learned.detector import MatchConfig, select_handle
+
+    boxes = [_box(128, 60), _box(128, 105), _box(128, 150)]
+    found = _detections([boxes[0], boxes[2]], [0.95, 0.9], [[0.9, 0.1], [0.9, 0.1]])
+    proposals = _detections([_box(128, 105, 24, 6), _box(128, 60, 24, 6), _box(30, 30, 6, 6)],
+                            [0.6, 0.9, 0.2], [[0.9, 0.1], [0.9, 0.1], [0.5, 0.5]])
+    box, _ = select_handle(found, proposals, "middle drawer", config=MatchConfig())
+    assert np.allclose(box, proposals.boxes[0])
+    # the proposal over an existing detection does not double it; the one the head rejects stays out
+    box, _ = select_handle(found, proposals, "bottom drawer", config=MatchConfig())
+    assert np.allclose(box, boxes[2])
+    empty = _detections(np.zeros((0, 4)), [], [])
+    assert select_handle(empty, None, "drawer") is None
+
+
+def test_a_one_class_rgb_detector_seeds_a_two_kind_rgbd_one(tmp_path):
+    """Fine-tuning start: every tensor of the parent is used; the new depth input starts at zero and
+    each kind row starts as the parent's handle row."""
+    import torch
+    from dataclasses import asdict
+
+    from opend_mj.policy.learned.detector import DetectorConfig, build_detector, init_from_detector
+
+    torch.manual_seed(0)
+    parent_cfg = DetectorConfig()
+    parent = build_detector(parent_cfg)
+    path = tmp_path / "parent.pt"
+    torch.save({"config": asdict(parent_cfg), "model": parent.state_dict()}, path)
+    child = build_detector(DetectorConfig(kinds=True, depth=True))
+    n = init_from_detector(child, path, log=lambda s: None)
+    assert n == len(parent.state_dict())
+    stem = child.backbone.stem[0][0].weight
+    assert stem.shape[1] == 4 and torch.equal(stem[:, :3], parent.backbone.stem[0][0].weight)
+    assert torch.count_nonzero(stem[:, 3]) == 0
+    cls = child.roi_heads.box_predictor.cls_score.weight
+    ref = parent.roi_heads.box_predictor.cls_score.weight
+    assert torch.equal(cls[1], ref[1]) and torch.equal(cls[2], ref[1]) and torch.equal(cls[0], ref[0])
+
+
+def test_depth_relief_marks_what_stands_proud():
+    from opend_mj.policy.learned.detector import DetectorConfig, depth_relief, detector_input
+
+    depth = _cabinet_depth()
+    relief = depth_relief(depth)
+    assert relief[72, 85] > 0.4  # on the bar, 3 cm proud of the panel
+    assert abs(relief[120, 128]) < 0.05  # the middle of the flat panel
+    x = detector_input(np.zeros((256, 256, 3), np.uint8), depth, DetectorConfig(depth=True))
+    assert x.shape == (4, 256, 256)
+    with pytest.raises(ValueError, match="depth"):
+        detector_input(np.zeros((256, 256, 3), np.uint8), None, DetectorConfig(depth=True))

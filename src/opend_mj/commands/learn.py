@@ -68,10 +68,17 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--pretrained", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Local torchvision classification weights for the image stream (resnet18 for cliport, "
                    "mobilenet_v3_large / resnet50 for fasterrcnn); nothing is downloaded. Default: from scratch.")
+@click.option("--kinds/--no-kinds", default=True, show_default=True,
+              help="fasterrcnn: two handle classes (drawer, door), so a drawer is ranked among drawers.")
+@click.option("--depth/--no-depth", default=True, show_default=True,
+              help="fasterrcnn (compact_fpn): read the depth relief as a fourth channel.")
+@click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="fasterrcnn: start from this detector checkpoint (fine-tuning; a one-class checkpoint "
+                   "seeds both kinds).")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold,
-          pretrained, progress):
+          pretrained, kinds, depth, init, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
@@ -101,7 +108,8 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         from opend_mj.policy.learned.detector import DetectorConfig
 
         cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
-                             max_size=max(min_size, 640) if min_size else None)
+                             max_size=max(min_size, 640) if min_size else None, kinds=kinds,
+                             depth=depth and backbone == "compact_fpn")
         meta = T.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
-                                  log=click.echo, **common)
+                                  init=init, log=click.echo, **common)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")

@@ -149,9 +149,57 @@ class DetectorConfig:
     box_batch_per_image: int = 64  # torchvision: 512
     box_positive_fraction: float = 0.5  # torchvision: 0.25 (handles are few and small)
     box_score_thresh: float = 0.01  # torchvision: 0.05 (the solver applies its own threshold)
+    #: Two handle classes, drawer and door (``KIND_LABELS``), instead of one: the solver then keeps
+    #: the handles of the instructed kind before Algorithm 1 (a "top drawer" is ranked among drawers).
+    kinds: bool = False
+    #: A fourth input channel, the depth relief (:func:`depth_relief`: how far each pixel stands
+    #: proud of its neighbourhood): a handle's shape in depth is the same on real and generated
+    #: cabinets where its colour and texture are not. ``compact_fpn`` only.
+    depth: bool = False
+
+    @property
+    def num_classes(self) -> int:
+        return 3 if self.kinds else 2
+
+    @property
+    def in_channels(self) -> int:
+        return 4 if self.depth else 3
 
 
-def compact_backbone(width: int = 32, out_channels: int = 64):
+#: Window (pixels) of the local mean depth that the relief channel is measured against, and the
+#: relief that maps to 1 (metres; handles stand 1.2-9 cm proud of their panel).
+RELIEF_WINDOW = 25
+RELIEF_SCALE = 0.05
+
+
+def depth_relief(depth: np.ndarray) -> np.ndarray:
+    """(H, W) float32 in [-1, 1]: the local mean depth (``RELIEF_WINDOW`` px) minus the depth, over
+    ``RELIEF_SCALE``; positive where a pixel stands nearer than its surroundings (a handle)."""
+    from scipy.ndimage import uniform_filter
+
+    d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
+    d = np.where(d > 0.05, d, 10.0).astype(np.float32)
+    return np.clip((uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE, -1.0, 1.0)
+
+
+def detector_input(rgb: np.ndarray, depth: np.ndarray | None, config: "DetectorConfig"):
+    """The (C, H, W) float tensor a detector reads: RGB in [0, 1], then the depth relief if
+    ``config.depth`` (a detector with depth needs the depth image)."""
+    import torch
+
+    x = torch.from_numpy(np.array(rgb, copy=True)).permute(2, 0, 1).float().div(255.0)
+    if config.depth:
+        if depth is None:
+            raise ValueError("this detector reads depth (DetectorConfig.depth): pass the depth image")
+        x = torch.cat([x, torch.from_numpy(depth_relief(depth))[None]], 0)
+    return x
+
+
+#: Class labels of a detector with ``kinds``: 0 is background.
+KIND_LABELS = {"drawer": 1, "door": 2}
+
+
+def compact_backbone(width: int = 32, out_channels: int = 64, in_channels: int = 3):
     """A small residual CNN with an FPN over its stride-4, -8 and -16 stages (``out_channels`` wide),
     as torchvision's detection backbones are: a module mapping images to an ordered dict of
     feature maps, with an ``out_channels`` attribute."""
@@ -179,7 +227,7 @@ def compact_backbone(width: int = 32, out_channels: int = 64):
         def __init__(self):
             super().__init__()
             w = width
-            self.stem = nn.Sequential(conv(3, w // 2, 2), conv(w // 2, w, 1))  # stride 2
+            self.stem = nn.Sequential(conv(in_channels, w // 2, 2), conv(w // 2, w, 1))  # stride 2
             self.s4 = nn.Sequential(Block(w, w, 2), Block(w, w, 1))
             self.s8 = nn.Sequential(Block(w, 2 * w, 2), Block(2 * w, 2 * w, 1))
             self.s16 = nn.Sequential(Block(2 * w, 4 * w, 2), Block(4 * w, 4 * w, 1))
@@ -206,13 +254,15 @@ def build_detector(config: DetectorConfig = DetectorConfig()):
         raise ValueError(f"backbone must be one of {BACKBONES}, got {config.backbone!r}")
     if config.backbone == "compact_fpn":
         return _build_compact(config)
+    if config.depth:
+        raise ValueError(f"the depth channel needs the compact_fpn backbone, not {config.backbone!r}")
     builder = getattr(torchvision.models.detection, f"fasterrcnn_{config.backbone}")
     kwargs = {}
     if config.min_size is not None:
         kwargs["min_size"] = config.min_size
     if config.max_size is not None:
         kwargs["max_size"] = config.max_size
-    model = builder(weights=None, weights_backbone=None, num_classes=2, **kwargs)
+    model = builder(weights=None, weights_backbone=None, num_classes=config.num_classes, **kwargs)
     n_levels = 5 if config.backbone == "resnet50_fpn" else 3
     if config.small_anchors:
         base = (8, 16, 32, 64, 128)[:n_levels] if n_levels == 5 else (8, 16, 32)
@@ -229,7 +279,7 @@ def build_detector(config: DetectorConfig = DetectorConfig()):
     if config.box_head_dim != 1024:
         res = model.roi_heads.box_roi_pool.output_size[0]
         model.roi_heads.box_head = fr.TwoMLPHead(model.backbone.out_channels * res * res, config.box_head_dim)
-        model.roi_heads.box_predictor = fr.FastRCNNPredictor(config.box_head_dim, 2)
+        model.roi_heads.box_predictor = fr.FastRCNNPredictor(config.box_head_dim, config.num_classes)
     return model
 
 
@@ -242,12 +292,15 @@ def _build_compact(config: "DetectorConfig"):
     from torchvision.models.detection.anchor_utils import AnchorGenerator
     from torchvision.ops import MultiScaleRoIAlign
 
-    backbone = compact_backbone()
+    backbone = compact_backbone(in_channels=config.in_channels)
+    mean, std = [0.485, 0.456, 0.406], [0.229, 0.224, 0.225]  # torchvision's; relief is already in [-1, 1]
+    if config.depth:
+        mean, std = mean + [0.0], std + [0.5]
     ratios = (0.1, 0.25, 1.0, 4.0, 10.0)
     anchor = AnchorGenerator(((8, 16), (24, 40), (64, 96), (128, 192)), (ratios,) * 4)
     size = config.min_size or 256
     model = FasterRCNN(
-        backbone, num_classes=None, min_size=size, max_size=config.max_size or size,
+        backbone, num_classes=None, min_size=size, max_size=config.max_size or size, image_mean=mean, image_std=std,
         rpn_anchor_generator=anchor,
         box_roi_pool=MultiScaleRoIAlign(["0", "1", "2"], output_size=7, sampling_ratio=2),
         rpn_fg_iou_thresh=0.5, rpn_bg_iou_thresh=0.3,
@@ -256,18 +309,51 @@ def _build_compact(config: "DetectorConfig"):
         box_batch_size_per_image=config.box_batch_per_image, box_positive_fraction=config.box_positive_fraction,
         box_score_thresh=config.box_score_thresh,
         box_head=fr.TwoMLPHead(backbone.out_channels * 49, config.box_head_dim),
-        box_predictor=fr.FastRCNNPredictor(config.box_head_dim, 2))
+        box_predictor=fr.FastRCNNPredictor(config.box_head_dim, config.num_classes))
     return model
 
 
-def detector_targets(record: dict, device=None) -> dict:
-    """torchvision targets (boxes, labels) from a data record: every visible handle box."""
+def detector_targets(record: dict, device=None, kinds: bool = False) -> dict:
+    """torchvision targets (boxes, labels) from a data record: every visible handle box, labelled 1
+    (handle) or, with ``kinds``, by its target type (``KIND_LABELS``)."""
     import torch
 
-    boxes = [t["box"] for t in record["targets"] if t["box"] is not None
-             and t["box"][2] - t["box"][0] >= 1.0 and t["box"][3] - t["box"][1] >= 1.0]
-    b = torch.tensor(boxes, dtype=torch.float32, device=device).reshape(-1, 4)
-    return {"boxes": b, "labels": torch.ones(len(b), dtype=torch.int64, device=device)}
+    visible = [t for t in record["targets"] if t["box"] is not None
+               and t["box"][2] - t["box"][0] >= 1.0 and t["box"][3] - t["box"][1] >= 1.0]
+    b = torch.tensor([t["box"] for t in visible], dtype=torch.float32, device=device).reshape(-1, 4)
+    labels = [KIND_LABELS[t["type"]] if kinds else 1 for t in visible]
+    return {"boxes": b, "labels": torch.tensor(labels, dtype=torch.int64, device=device)}
+
+
+def init_from_detector(model, checkpoint: Path | str, log=print) -> int:
+    """Start a detector from another detector checkpoint's weights (fine-tuning): every tensor whose
+    shape fits; a one-class checkpoint's handle row seeds each kind row of a two-kind model (class
+    scores and box regression), so a kinds model starts as good a detector as its parent. Returns
+    the tensors loaded."""
+    import torch
+
+    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    src = {k: v.float() for k, v in src.get("model", src).items()}
+    own = model.state_dict()
+    loaded = {}
+    for k, v in src.items():
+        if k not in own:
+            continue
+        if own[k].shape == v.shape:
+            loaded[k] = v
+        elif v.ndim == 4 and own[k].shape[1] > v.shape[1] and own[k].shape[0] == v.shape[0]:
+            w = torch.zeros_like(own[k])  # a first conv given more input channels: new ones start at zero
+            w[:, :v.shape[1]] = v
+            loaded[k] = w
+        elif k.endswith("cls_score.weight") or k.endswith("cls_score.bias"):
+            rows = [0] + [1] * (own[k].shape[0] - 1)  # background, then the handle row per kind
+            loaded[k] = v[rows].clone()
+        elif k.endswith("bbox_pred.weight") or k.endswith("bbox_pred.bias"):
+            n = own[k].shape[0] // 4
+            loaded[k] = torch.cat([v[0:4]] + [v[4:8]] * (n - 1)).clone()
+    model.load_state_dict(loaded, strict=False)
+    log(f"init: {len(loaded)} of {len(own)} tensors from {checkpoint}")
+    return len(loaded)
 
 
 def load_detector(checkpoint: Path | str | None = None, device: str | None = None):
@@ -282,43 +368,183 @@ def load_detector(checkpoint: Path | str | None = None, device: str | None = Non
                            device)
 
 
-def detect(model, rgb: np.ndarray, device=None) -> tuple[np.ndarray, np.ndarray]:
-    """(boxes (N, 4), scores (N,)) of one RGB image, highest score first."""
+def _input(model, rgb, depth):
+    return detector_input(rgb, depth, DetectorConfig(depth=len(model.transform.image_mean) == 4))
+
+
+def detect(model, rgb: np.ndarray, device=None, depth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(boxes (N, 4), scores (N,)) of one RGB image, highest score first: torchvision's own
+    post-processing (per class). See :func:`detect_handles` for one box per handle with its kind."""
     import torch
 
     device = device or next(model.parameters()).device
-    x = torch.from_numpy(np.array(rgb, copy=True)).permute(2, 0, 1).float().div(255.0).to(device)
+    x = _input(model, rgb, depth).to(device)
     with torch.no_grad():
         out = model([x])[0]
     return out["boxes"].cpu().numpy(), out["scores"].cpu().numpy()
 
 
+@dataclass
+class Detections:
+    """Handles in one image: ``boxes`` (N, 4) in pixels, ``handle`` (N,) the probability that the box
+    is a handle (1 - background), ``kind`` (N, K) the class probabilities among handles (K = 1 for a
+    one-class detector; else drawer, door as in ``KIND_LABELS``)."""
+
+    boxes: np.ndarray
+    handle: np.ndarray
+    kind: np.ndarray
+
+    def kind_probability(self, kind: str) -> np.ndarray:
+        if self.kind.shape[1] == 1:
+            return np.ones(len(self.boxes))
+        return self.kind[:, KIND_LABELS[kind] - 1]
+
+
+def detect_handles(model, rgb: np.ndarray, extra_boxes=None, nms_iou: float = 0.5,
+                   min_score: float = 0.05, depth: np.ndarray | None = None) -> tuple[Detections, Detections]:
+    """One box per handle, class-agnostic: (detections, the ``extra_boxes`` scored).
+
+    The RPN proposes, the box head scores each proposal (handle = 1 - background; kind = the class
+    probabilities renormalised among the handle classes) and regresses its box by the most likely
+    kind; boxes are then suppressed across classes (``nms_iou``), so a handle the head half calls a
+    drawer and half a door is one detection with its whole handle probability. ``extra_boxes``
+    (M, 4), e.g. handles that depth proposes, are scored by the same head as they are (no
+    regression): the detector says which of them are handles and of which kind."""
+    import torch
+    from torchvision.ops import batched_nms, clip_boxes_to_image, remove_small_boxes
+
+    device = next(model.parameters()).device
+    x = _input(model, rgb, depth).to(device)
+    h, w = rgb.shape[:2]
+    with torch.no_grad():
+        images, _ = model.transform([x])
+        features = model.backbone(images.tensors)
+        proposals, _ = model.rpn(images, features)
+        scale_x = images.image_sizes[0][1] / w
+        scale_y = images.image_sizes[0][0] / h
+        scale = torch.tensor([scale_x, scale_y, scale_x, scale_y], device=device)
+        extra = torch.as_tensor(np.asarray(extra_boxes if extra_boxes is not None else np.zeros((0, 4))),
+                                dtype=torch.float32, device=device).reshape(-1, 4) * scale
+        heads = model.roi_heads
+
+        def head(boxes):
+            feats = heads.box_head(heads.box_roi_pool(features, [boxes], images.image_sizes))
+            logits, regression = heads.box_predictor(feats)
+            return torch.softmax(logits, -1), regression
+
+        probs, regression = head(proposals[0])
+        handle = 1.0 - probs[:, 0]
+        kind_p = probs[:, 1:] / handle.clamp_min(1e-9)[:, None]
+        best = probs[:, 1:].argmax(1) + 1
+        decoded = heads.box_coder.decode(regression, [proposals[0]]).reshape(len(proposals[0]), -1, 4)
+        boxes = decoded[torch.arange(len(best), device=device), best]
+        boxes = clip_boxes_to_image(boxes, images.image_sizes[0])
+        keep = handle >= min_score
+        boxes, handle, kind_p = boxes[keep], handle[keep], kind_p[keep]
+        keep = remove_small_boxes(boxes, 1e-2)
+        boxes, handle, kind_p = boxes[keep], handle[keep], kind_p[keep]
+        keep = batched_nms(boxes, handle, torch.zeros(len(boxes), dtype=torch.int64, device=device), nms_iou)
+        boxes, handle, kind_p = boxes[keep] / scale, handle[keep], kind_p[keep]
+        if len(extra):
+            eprobs, _ = head(extra)
+            ehandle = 1.0 - eprobs[:, 0]
+            ekind = eprobs[:, 1:] / ehandle.clamp_min(1e-9)[:, None]
+        else:
+            ehandle, ekind = torch.zeros(0, device=device), torch.zeros((0, probs.shape[1] - 1), device=device)
+    found = Detections(boxes.cpu().numpy().reshape(-1, 4), handle.cpu().numpy(), kind_p.cpu().numpy())
+    scored = Detections((extra / scale).cpu().numpy().reshape(-1, 4), ehandle.cpu().numpy(), ekind.cpu().numpy())
+    return found, scored
+
+
+def _overlaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a), len(b)) True where a box of ``a`` holds the centre of a box of ``b`` or the reverse."""
+    ca = np.stack([(a[:, 0] + a[:, 2]) / 2, (a[:, 1] + a[:, 3]) / 2], 1)
+    cb = np.stack([(b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2], 1)
+
+    def inside(boxes, pts):
+        return ((pts[None, :, 0] >= boxes[:, None, 0]) & (pts[None, :, 0] <= boxes[:, None, 2])
+                & (pts[None, :, 1] >= boxes[:, None, 1]) & (pts[None, :, 1] <= boxes[:, None, 3]))
+
+    return inside(a, cb) | inside(b, ca).T
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    """How the solver turns detections (and depth proposals) into the named handle."""
+
+    threshold: float = 0.8  # handle probability of a detection (the paper's 0.8)
+    #: Depth proposals (handles standing proud of a panel) that no detection covers join the
+    #: candidates when the detector's head calls them a handle with this probability: depth says
+    #: where a handle is, the head says whether it is one and of which kind.
+    proposal_threshold: float = 0.5
+    use_proposals: bool = True
+    #: With a kinds detector, candidates of the instructed kind (probability among handle classes).
+    kind_threshold: float = 0.5
+
+
+def select_handle(found: Detections, proposals: Detections | None, instruction: str, depth=None,
+                  camera_view=None, config: MatchConfig = MatchConfig()) -> tuple[np.ndarray, float] | None:
+    """(box, handle probability) of the handle the instruction names, or None without candidates.
+
+    Candidates: detections above ``threshold``, plus depth proposals no detection covers that the
+    head calls handles; with a kinds detector, those of the instructed kind (all of them where none
+    is); Algorithm 1 (:func:`match_instruction`) picks among them."""
+    keep = found.handle >= config.threshold
+    boxes, handle, kind = found.boxes[keep], found.handle[keep], found.kind[keep]
+    if config.use_proposals and proposals is not None and len(proposals.boxes):
+        add = proposals.handle >= config.proposal_threshold
+        if len(boxes):
+            add &= ~_overlaps(proposals.boxes, boxes).any(1)
+        boxes = np.concatenate([boxes, proposals.boxes[add]])
+        handle = np.concatenate([handle, proposals.handle[add]])
+        kind = np.concatenate([kind, proposals.kind[add]])
+    if not len(boxes):
+        return None
+    named = describe_instruction(instruction)
+    if kind.shape[1] > 1 and named.kind in KIND_LABELS:
+        of_kind = kind[:, KIND_LABELS[named.kind] - 1] >= config.kind_threshold
+        if of_kind.any():
+            boxes, handle = boxes[of_kind], handle[of_kind]
+    i = match_instruction(boxes, instruction, depth, camera_view, handle)
+    return (boxes[i], float(handle[i])) if i is not None else None
+
+
 class FasterRCNNSolver:
-    """Handle solver: Faster R-CNN detections matched to the instruction with Algorithm 1."""
+    """Handle solver: Faster R-CNN detections (and the depth proposals its head accepts) matched
+    to the instruction with Algorithm 1; see :func:`select_handle`."""
 
     name = "fasterrcnn"
     needs_ground_truth = False
 
     def __init__(self, checkpoint: Path | str | None = None, threshold: float | None = None, device: str | None = None,
-                 fallback_to_best: bool = False):
-        """``threshold`` None: the checkpoint's ``threshold`` (0.8, the paper's, unless it says otherwise)."""
+                 proposals: bool = True, canonical: bool = True, **match):
+        """``threshold`` None: the checkpoint's ``threshold`` (0.8, the paper's, unless it says
+        otherwise); ``match``: other :class:`MatchConfig` fields."""
         self.model, self.config, self.checkpoint = load_detector(checkpoint, device)
-        self.threshold = float(threshold if threshold is not None else self.checkpoint.get("threshold", 0.8))
-        self.fallback_to_best = fallback_to_best
-        self.last_detections: tuple[np.ndarray, np.ndarray] | None = None
+        threshold = float(threshold if threshold is not None else self.checkpoint.get("threshold", 0.8))
+        self.match = MatchConfig(threshold=threshold, use_proposals=proposals, **match)
+        #: Read the instruction through Algorithm 1's parser first, so reworded instructions name
+        #: the same position and kind.
+        self.canonical = canonical
+        self.last_detections: Detections | None = None
 
     def solve(self, rgb, depth, instruction, camera_view):
+        from opend_mj.language import canonical_instruction
         from opend_mj.policy.handle import HandleBox
 
-        boxes, scores = detect(self.model, rgb)
-        self.last_detections = (boxes, scores)
-        keep = scores >= self.threshold
-        if not keep.any() and self.fallback_to_best and len(scores):
-            keep = scores >= scores.max() * 0.999
-        boxes, scores = boxes[keep], scores[keep]
-        i = match_instruction(boxes, instruction, depth, camera_view, scores)
-        if i is None:
+        if self.canonical:
+            instruction = canonical_instruction(instruction)
+        extra = None
+        if self.match.use_proposals and depth is not None and camera_view is not None:
+            from opend_mj.policy.perception import handle_proposals
+
+            extra = np.array([box for box, _ in handle_proposals(depth, camera_view)], float).reshape(-1, 4)
+        found, scored = detect_handles(self.model, rgb, extra, depth=depth)
+        self.last_detections = found
+        chosen = select_handle(found, scored if extra is not None else None, instruction, depth, camera_view,
+                               self.match)
+        if chosen is None:
             return None
-        b = boxes[i]
+        b, score = chosen
         return HandleBox(float(b[0]), float(b[1]), float(b[2]), float(b[3]), orientation=box_orientation(b),
-                         score=float(scores[i]))
+                         score=score)

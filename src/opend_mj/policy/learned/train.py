@@ -381,22 +381,35 @@ def evaluate_cliport(checkpoint: Path, data_dir: Path, subset: str = "val", devi
 # --------------------------------------------------------------------------------------------------
 
 
-def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev):
+def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev, config=None):
+    """Images and targets of a batch. Augmentation: horizontal flips; and with a depth channel, the
+    colours shuffled, scaled or greyed out (a quarter of the images each), so the detector learns
+    handles from their shape in depth as well as from their look."""
     import torch
 
-    from opend_mj.policy.learned.detector import detector_targets
+    from opend_mj.policy.learned.detector import DetectorConfig, detector_input, detector_targets
 
+    config = config or DetectorConfig()
     xs, ys = [], []
     for i in idx:
         rec = records[i]
-        rgb, _, _ = load_images(data_dir, rec)
-        tgt = detector_targets(rec)
+        rgb, depth, _ = load_images(data_dir, rec)
+        tgt = detector_targets(rec, kinds=config.kinds)
         if augment and rng.random() < 0.5:
-            rgb = rgb[:, ::-1]
+            rgb, depth = rgb[:, ::-1], depth[:, ::-1]
             b = tgt["boxes"].clone()
             w = rec["width"]
             tgt["boxes"] = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], 1) if len(b) else b
-        xs.append(torch.from_numpy(np.array(rgb, copy=True)).permute(2, 0, 1).float().div(255.0).to(dev))
+        x = detector_input(rgb, depth, config)
+        if augment and config.depth:
+            r = rng.random()
+            if r < 0.25:
+                x[:3] = x[[*rng.sample(range(3), 3)]]
+            elif r < 0.5:
+                x[:3] = (x[:3] * rng.uniform(0.4, 1.3)).clamp(0, 1)
+            elif r < 0.75:
+                x[:3] = x[:3].mean(0, keepdim=True) if rng.random() < 0.5 else 0.5
+        xs.append(x.to(dev))
         ys.append({k: v.to(dev) for k, v in tgt.items()})
     return xs, ys
 
@@ -411,23 +424,24 @@ def _set_bn_eval(model) -> None:
 
 def evaluate_detector_model(model, data_dir: Path, records: list[dict], threshold: float = 0.8,
                             progress: bool = False) -> dict:
-    """Target recall at IoU 0.5 after language matching, and plain handle recall."""
+    """Target recall at IoU 0.5 after language matching (the solver's :func:`select_handle` on the
+    detections alone, no depth proposals), and plain handle recall."""
     from tqdm import tqdm
 
-    from opend_mj.policy.learned.detector import detect, match_instruction
+    from opend_mj.policy.learned.detector import MatchConfig, detect_handles, select_handle
 
     model.eval()
+    match = MatchConfig(threshold=threshold, use_proposals=False)
     matched, found, per = [], [], {"door": [], "drawer": []}
     for rec in tqdm(records, disable=not progress, desc="eval detector"):
         rgb, depth, _ = load_images(data_dir, rec)
-        boxes, scores = detect(model, rgb)
-        keep = scores >= threshold
-        boxes, scores = boxes[keep], scores[keep]
+        dets, _ = detect_handles(model, rgb, depth=depth)
+        boxes = dets.boxes[dets.handle >= threshold]
         view = camera_view_of(rec)
         for t in _valid_targets(rec):
             found.append(any(iou(b, t["box"]) >= 0.5 for b in boxes))
-            i = match_instruction(boxes, t["instruction"], depth, view, scores)
-            ok = i is not None and iou(boxes[i], t["box"]) >= 0.5
+            chosen = select_handle(dets, None, t["instruction"], depth, view, match)
+            ok = chosen is not None and iou(chosen[0], t["box"]) >= 0.5
             matched.append(ok)
             per[t["type"]].append(ok)
     return {"target_recall": float(np.mean(matched)) if matched else float("nan"),
@@ -442,12 +456,13 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
                      state_path: Path | None = None, device: str | None = None, progress: bool = True,
                      seed: int = 0, max_train: int | None = None, max_val: int | None = None,
                      threshold: float = 0.8, eval_every: int = 1, pretrained: Path | None = None,
-                     log: Callable[[str], None] = print) -> dict:
-    """Train a Faster R-CNN handle detector; returns the checkpoint's metadata."""
+                     init: Path | None = None, log: Callable[[str], None] = print) -> dict:
+    """Train a Faster R-CNN handle detector; returns the checkpoint's metadata. ``init``: start from
+    another detector checkpoint (:func:`~opend_mj.policy.learned.detector.init_from_detector`)."""
     import torch
     from tqdm import tqdm
 
-    from opend_mj.policy.learned.detector import DetectorConfig, build_detector
+    from opend_mj.policy.learned.detector import DetectorConfig, build_detector, init_from_detector
 
     config = config or DetectorConfig()
     data_dir = Path(data_dir)
@@ -461,6 +476,8 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     model = build_detector(config)
     if pretrained and not resume:
         load_pretrained(model, pretrained, "fasterrcnn", log)
+    if init and not resume:
+        init_from_detector(model, init, log)
     model = model.to(dev)
     params = [p for p in model.parameters() if p.requires_grad]
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
@@ -478,7 +495,7 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
                    unit="batch")
         stopped = False
         for b in bar:
-            x, y = _detector_batch(data_dir, train_recs, order[b:b + batch_size], True, rng, dev)
+            x, y = _detector_batch(data_dir, train_recs, order[b:b + batch_size], True, rng, dev, config)
             ld = model(x, y)
             loss = sum(ld.values())
             opt.zero_grad()
@@ -502,7 +519,7 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
         with torch.no_grad():
             for b in range(0, len(val_recs), batch_size):
                 idx = list(range(b, min(b + batch_size, len(val_recs))))
-                x, y = _detector_batch(data_dir, val_recs, idx, False, rng, dev)
+                x, y = _detector_batch(data_dir, val_recs, idx, False, rng, dev, config)
                 vl.append(float(sum(model(x, y).values())) * len(idx))
         row = {"epoch": epoch + 1, "train_loss": float(np.mean(losses)) if losses else float("nan"),
                "val_loss": float(np.sum(vl) / max(1, len(val_recs))),
@@ -517,7 +534,8 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val target recall {row.get('val_target_recall', float('nan')):.3f}  "
             f"handle recall {row.get('val_handle_recall', float('nan')):.3f}  ({row['seconds']:.0f} s)")
-        loop.save(epoch, model, opt, sched, {"config": asdict(config), "data": str(data_dir), "threshold": threshold},
+        loop.save(epoch, model, opt, sched, {"config": asdict(config), "data": str(data_dir), "threshold": threshold,
+                                             **({"init": str(init)} if init else {})},
                   metric="val_target_recall" if "val_target_recall" in row else None)
         if stopped:
             log(f"stopped: time limit of {max_minutes} min reached")
