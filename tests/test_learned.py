@@ -378,10 +378,11 @@ def test_a_depth_proposal_fills_a_missed_detection():
     found = _detections([boxes[0], boxes[2]], [0.95, 0.9], [[0.9, 0.1], [0.9, 0.1]])
     proposals = _detections([_box(128, 105, 24, 6), _box(128, 60, 24, 6), _box(30, 30, 6, 6)],
                             [0.6, 0.9, 0.2], [[0.9, 0.1], [0.9, 0.1], [0.5, 0.5]])
-    box, _ = select_handle(found, proposals, "middle drawer", config=MatchConfig())
+    cfg = MatchConfig(depth_verified=False, proposal_threshold=0.5)
+    box, _ = select_handle(found, proposals, "middle drawer", config=cfg)
     assert np.allclose(box, proposals.boxes[0])
     # the proposal over an existing detection does not double it; the one the head rejects stays out
-    box, _ = select_handle(found, proposals, "bottom drawer", config=MatchConfig())
+    box, _ = select_handle(found, proposals, "bottom drawer", config=cfg)
     assert np.allclose(box, boxes[2])
     empty = _detections(np.zeros((0, 4)), [], [])
     assert select_handle(empty, None, "drawer") is None
@@ -422,3 +423,27 @@ def test_depth_relief_marks_what_stands_proud():
     assert x.shape == (4, 256, 256)
     with pytest.raises(ValueError, match="depth"):
         detector_input(np.zeros((256, 256, 3), np.uint8), None, DetectorConfig(depth=True))
+
+
+def test_depth_verified_candidates_drop_an_edge_the_detector_takes_for_a_handle():
+    """The default: only depth proposals are candidates. A confident detection on a seam below the
+    drawers (no proposal there) no longer counts, so "bottom drawer" is the lowest real handle; a
+    proposal takes its kind from the detection covering it."""
+    from opend_mj.policy.learned.detector import MatchConfig, select_handle
+
+    handles = [_box(128, 60), _box(128, 105), _box(128, 150)]
+    seam = _box(128, 200, 120, 3)
+    found = _detections([handles[0], seam], [0.95, 0.97], [[0.9, 0.1], [0.8, 0.2]])
+    proposals = _detections(handles + [_box(60, 120, 4, 40)], [0.01, 0.02, 0.01, 0.3],
+                            [[0.2, 0.8], [0.9, 0.1], [0.7, 0.3], [0.1, 0.9]])
+    box, _ = select_handle(found, proposals, "bottom drawer", config=MatchConfig())
+    assert np.allclose(box, handles[2])
+    # the top proposal is a drawer by the detection over it, though the head alone said door
+    box, _ = select_handle(found, proposals, "top drawer", config=MatchConfig())
+    assert np.allclose(box, handles[0])
+    # the door's bar is the only door candidate
+    box, _ = select_handle(found, proposals, "door", config=MatchConfig())
+    assert np.allclose(box, proposals.boxes[3])
+    # the detections alone (the paper's way) take the seam for the bottom drawer
+    box, _ = select_handle(found, None, "bottom drawer", config=MatchConfig(depth_verified=False))
+    assert np.allclose(box, seam)
