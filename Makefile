@@ -44,17 +44,19 @@ results: install
 ## oracle planner with all four hands on every target, and score it. The build's hash split is the
 ## train part (tune on it) and the test part (report it as validation). Outputs stay under build/
 ## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository.
-## SPLIT=test runs the validation part only.
+## SPLIT=test runs the validation part only; SOLVER=cliport or SOLVER=fasterrcnn runs a learned solver.
 SOURCE ?= ../shared/opend-train
+SOLVER ?= oracle
 REAL_CABINETS ?= build/$(notdir $(abspath $(SOURCE)))
 REAL_OUT ?= build/real-results
 SPLIT ?= all
 eval-real: install
 	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
 	mkdir -p $(REAL_OUT)
-	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split $(SPLIT) \
-		--workers $(WORKERS) --cabinets $(REAL_CABINETS) --out $(REAL_OUT)/oracle_real.jsonl
-	$(BIN)/opend score $(REAL_OUT)/oracle_real.jsonl --csv $(REAL_OUT)/scores.csv --plot $(REAL_OUT)/scores.png
+	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver $(SOLVER) --split $(SPLIT) \
+		--workers $(WORKERS) --cabinets $(REAL_CABINETS) --out $(REAL_OUT)/$(SOLVER)_real.jsonl
+	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real.jsonl --csv $(REAL_OUT)/$(SOLVER)_scores.csv \
+		--plot $(REAL_OUT)/$(SOLVER)_scores.png
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:
