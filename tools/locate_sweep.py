@@ -22,28 +22,13 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 def render_frames(cabinets: Path, split: str, light_scale: float = 1.0, paraphrase: int = 0) -> list[dict]:
     from tqdm import tqdm
 
-    from opend_mj.evaluation.jobs import group_jobs
-    from opend_mj.evaluation.locate import locate_jobs
-    from opend_mj.evaluation.runner import instruction_for, make_episode_env
-    from opend_mj.sim.camera import RGBDCamera
+    from opend_mj.evaluation.locate import locate_frames, locate_jobs
 
     jobs = locate_jobs(cabinets, split, 0, light_scale, paraphrase)
-    frames = []
-    bar = tqdm(total=len(jobs), desc="render", unit="target")
-    for group in group_jobs(jobs):
-        env = make_episode_env(group[0])
-        for job in group:
-            env.task.set_target(job.joint, instruction_for(job))
-            env.reset()
-            with RGBDCamera(env.physics, "front", env.task.config.image_size, env.task.config.image_size) as cam:
-                rgb, depth = cam.render()
-            frames.append(dict(cabinet=job.cabinet, joint=job.joint, kind=env.task.target.kind,
-                               instruction=env.task.instruction, rgb=rgb, depth=depth,
-                               view=env.task.camera_view(env.physics), boxes=env.task.handle_boxes(env.physics)))
-            bar.update(1)
-        env.close()
-    bar.close()
-    return frames
+    return [dict(cabinet=job.cabinet, joint=job.joint, kind=task.target.kind, instruction=task.instruction,
+                 rgb=rgb, depth=depth, view=view, boxes=boxes)
+            for job, task, rgb, depth, view, boxes in tqdm(locate_frames(jobs), total=len(jobs), desc="render",
+                                                           unit="target")]
 
 
 def parse_variant(text: str) -> tuple[str, dict]:

@@ -67,17 +67,35 @@ def locate_jobs(cabinets_dir: Path, split: str = "test", seed: int = 0, light_sc
                      limit=limit, paraphrase=paraphrase)
 
 
+def locate_frames(jobs: list[EpisodeJob]):
+    """For each job, the scene its episode would see at the start: yields (job, task, rgb, depth,
+    camera view, every target's handle box). One environment per cabinet."""
+    from opend_mj.evaluation.jobs import group_jobs
+    from opend_mj.evaluation.runner import instruction_for, make_episode_env
+    from opend_mj.sim.camera import RGBDCamera
+
+    for group in group_jobs(jobs):
+        env = make_episode_env(group[0])
+        try:
+            for job in group:
+                env.task.set_target(job.joint, instruction_for(job))
+                env.reset()
+                physics, task = env.physics, env.task
+                with RGBDCamera(physics, "front", task.config.image_size, task.config.image_size) as cam:
+                    rgb, depth = cam.render()
+                yield job, task, rgb, depth, task.camera_view(physics), task.handle_boxes(physics)
+        finally:
+            env.close()
+
+
 def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", seed: int = 0,
                     light_scale: float = 1.0, paraphrase: int = 0, limit: int | None = None,
                     progress: bool = True, out: Path | None = None) -> list[LocateRecord]:
     """Grade ``solver_name`` on every target of ``split``; writes the records to ``out`` (JSONL) if given."""
     from tqdm import tqdm
 
-    from opend_mj.evaluation.jobs import group_jobs
-    from opend_mj.evaluation.runner import instruction_for, make_episode_env
     from opend_mj.policy.perception import refine_box_with_depth
     from opend_mj.policy.solvers import get_solver, needs_ground_truth
-    from opend_mj.sim.camera import RGBDCamera
 
     jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit)
     state: dict = {}
@@ -86,33 +104,24 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
     records: list[LocateRecord] = []
     bar = tqdm(total=len(jobs), desc=f"locate ({solver_name})", unit="target", disable=not progress,
                dynamic_ncols=True)
-    for group in group_jobs(jobs):
-        env = make_episode_env(group[0])
-        for job in group:
-            t0 = time.perf_counter()
-            env.task.set_target(job.joint, instruction_for(job))
-            env.reset()
-            physics, task = env.physics, env.task
-            with RGBDCamera(physics, "front", task.config.image_size, task.config.image_size) as cam:
-                rgb, depth = cam.render()
-            view = task.camera_view(physics)
-            boxes = task.handle_boxes(physics)
-            state.update(boxes=boxes, joint=job.joint)
-            found = solver.solve(rgb, depth, task.instruction, view)
-            box = list(found.as_tuple()) if found is not None else None
-            refined = box
-            if found is not None and not getattr(solver, "exact", False):
-                refined = list(refine_box_with_depth(found, depth, view).as_tuple())
-            gt = boxes.get(job.joint)
-            records.append(LocateRecord(
-                cabinet=job.cabinet, joint=job.joint, split=job.split, target_type=task.target.kind,
-                instruction=task.instruction, solver=solver_name, seed=job.seed, light_scale=job.light_scale,
-                paraphrase=job.paraphrase, box=[round(x, 2) for x in box] if box else None,
-                gt_box=[round(x, 2) for x in gt] if gt else None, verdict=grade(box, job.joint, boxes),
-                verdict_refined=grade(refined, job.joint, boxes), seconds=round(time.perf_counter() - t0, 3)))
-            bar.update(1)
-            bar.set_postfix(located=f"{sum(r.verdict == 'located' for r in records)}/{len(records)}")
-        env.close()
+    t0 = time.perf_counter()
+    for job, task, rgb, depth, view, boxes in locate_frames(jobs):
+        state.update(boxes=boxes, joint=job.joint)
+        found = solver.solve(rgb, depth, task.instruction, view)
+        box = list(found.as_tuple()) if found is not None else None
+        refined = box
+        if found is not None and not getattr(solver, "exact", False):
+            refined = list(refine_box_with_depth(found, depth, view).as_tuple())
+        gt = boxes.get(job.joint)
+        records.append(LocateRecord(
+            cabinet=job.cabinet, joint=job.joint, split=job.split, target_type=task.target.kind,
+            instruction=task.instruction, solver=solver_name, seed=job.seed, light_scale=job.light_scale,
+            paraphrase=job.paraphrase, box=[round(x, 2) for x in box] if box else None,
+            gt_box=[round(x, 2) for x in gt] if gt else None, verdict=grade(box, job.joint, boxes),
+            verdict_refined=grade(refined, job.joint, boxes), seconds=round(time.perf_counter() - t0, 3)))
+        bar.update(1)
+        bar.set_postfix(located=f"{sum(r.verdict == 'located' for r in records)}/{len(records)}")
+        t0 = time.perf_counter()
     bar.close()
     if out is not None:
         out = Path(out)

@@ -372,18 +372,6 @@ def _input(model, rgb, depth):
     return detector_input(rgb, depth, DetectorConfig(depth=len(model.transform.image_mean) == 4))
 
 
-def detect(model, rgb: np.ndarray, device=None, depth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(boxes (N, 4), scores (N,)) of one RGB image, highest score first: torchvision's own
-    post-processing (per class). See :func:`detect_handles` for one box per handle with its kind."""
-    import torch
-
-    device = device or next(model.parameters()).device
-    x = _input(model, rgb, depth).to(device)
-    with torch.no_grad():
-        out = model([x])[0]
-    return out["boxes"].cpu().numpy(), out["scores"].cpu().numpy()
-
-
 @dataclass
 class Detections:
     """Handles in one image: ``boxes`` (N, 4) in pixels, ``handle`` (N,) the probability that the box
@@ -488,8 +476,6 @@ class MatchConfig:
     #: while its drawer / door call on a depth proposal holds (real train part: 80.6 % located
     #: without kinds, 85.9 % with them; 42.9 % on the detections alone).
     depth_verified: bool = True
-    #: Candidates whose handle probability is at least this fraction of the best one's.
-    plausible_fraction: float = 0.0
 
 
 def select_handle(found: Detections, proposals: Detections | None, instruction: str, depth=None,
@@ -502,13 +488,14 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
     keep = found.handle >= config.threshold
     boxes, handle, kind = found.boxes[keep], found.handle[keep], found.kind[keep]
     if config.depth_verified and proposals is not None and len(proposals.boxes):
+        covering, covering_handle, covering_kind = boxes, handle, kind
         handle, kind = proposals.handle.copy(), proposals.kind.copy()
-        if len(boxes):
-            cover = _overlaps(proposals.boxes, boxes)
+        if len(covering):
+            cover = _overlaps(proposals.boxes, covering)
             for i in np.nonzero(cover.any(1))[0]:
                 j = np.nonzero(cover[i])[0]
-                j = j[np.argmax(found.handle[keep][j])]
-                handle[i], kind[i] = max(handle[i], found.handle[keep][j]), found.kind[keep][j]
+                j = j[np.argmax(covering_handle[j])]
+                handle[i], kind[i] = max(handle[i], covering_handle[j]), covering_kind[j]
         add = handle >= config.proposal_threshold
         boxes, handle, kind = proposals.boxes[add], handle[add], kind[add]
     elif config.use_proposals and proposals is not None and len(proposals.boxes):
@@ -525,9 +512,6 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
         of_kind = kind[:, KIND_LABELS[named.kind] - 1] >= config.kind_threshold
         if of_kind.any():
             boxes, handle = boxes[of_kind], handle[of_kind]
-    if config.plausible_fraction > 0:
-        plausible = handle >= config.plausible_fraction * handle.max()
-        boxes, handle = boxes[plausible], handle[plausible]
     if not named.vertical and not named.horizontal:  # "drawer", "door": the one most like a handle
         i = int(np.argmax(handle))
         return boxes[i], float(handle[i])
