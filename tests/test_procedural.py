@@ -347,6 +347,28 @@ def test_variety(sources):
     assert len({m["handle_finish"] for m in metas}) >= 4
 
 
+def test_door_bars_placed_like_real_ones(sources):
+    """Horizontal bars on doors run along the door's top or bottom edge, some centred across the door
+    (as on real cabinets, where a detector must not take every horizontal bar for a drawer's)."""
+    edge, centred, horizontal, doors = 0, 0, 0, 0
+    for path in sources:
+        pieces, _ = _link_pieces(path)
+        for tg in _meta(path)["procedural"]["targets"]:
+            if tg["type"] != "door":
+                continue
+            doors += 1
+            if tg["handle_orientation"] != "horizontal":
+                continue
+            horizontal += 1
+            (_, plo, phi), = [p for p in pieces[tg["link"]] if p[0].startswith("cabinet_door")]
+            cx, cy = tg["handle_center_m"][:2]
+            frac_y = (cy - plo[1]) / (phi[1] - plo[1])
+            edge += frac_y > 0.85 or frac_y < 0.15
+            centred += abs(cx - (plo[0] + phi[0]) / 2) < 0.01
+    assert 0.2 <= horizontal / doors <= 0.6, (horizontal, doors)
+    assert edge >= horizontal / 3 and centred >= 1, (edge, centred, horizontal)
+
+
 def test_language_mix(sources):
     """About half are describable; describable ones average about two targets, doors and drawers."""
     metas = [_meta(p)["procedural"] for p in sources]

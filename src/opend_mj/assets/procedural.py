@@ -38,7 +38,7 @@ from opend_mj.assets.layout import PARTNET_SCALE
 from opend_mj.language import LanguageConfig, LanguageInvalid, TargetLayout, describe
 
 #: Bumped whenever the generated geometry changes.
-GENERATOR_VERSION = "2"
+GENERATOR_VERSION = "3"
 
 HANDLE_KINDS = ("bar", "arched", "knob")
 
@@ -83,6 +83,14 @@ class GeneratorConfig:
     knob_cap_radius_range: tuple[float, float] = (0.017, 0.023)
     #: Door handles sit this far (m) from the door's free edge (double doors: handles 3-12 cm apart).
     door_handle_margin_range: tuple[float, float] = (0.015, 0.06)
+    #: Door handles that are horizontal bars (real side-hinged doors of the OpenD training cabinets:
+    #: 47 of 126; generator 2 had 20 %). Of those, the real ones sit along the door's top edge (34 of
+    #: 47; else along its bottom edge, as on wall units), 2-5 cm from it, centred across the door
+    #: about half of the time (24 of 47; else near its free edge).
+    door_horizontal_share: float = 0.37
+    door_bar_top_share: float = 0.72
+    door_bar_centred_share: float = 0.5
+    door_bar_edge_range: tuple[float, float] = (0.03, 0.06)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -427,7 +435,7 @@ def _handle_style(rng: np.random.Generator, cfg: GeneratorConfig, target: str,
     elif target == "drawer":
         orient = "vertical" if rng.random() < 0.12 else "horizontal"
     else:
-        orient = "horizontal" if rng.random() < 0.2 else "vertical"
+        orient = "horizontal" if rng.random() < cfg.door_horizontal_share else "vertical"
     return HandleStyle(
         kind=kind,
         orientation=orient,
@@ -621,6 +629,9 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
     door_upper = float(rng.uniform(1.57, 2.0))
     door_handle_margin = float(rng.uniform(*cfg.door_handle_margin_range))
     door_handle_dy = float(rng.uniform(-0.25, 0.25))
+    door_bar_top = bool(rng.random() < cfg.door_bar_top_share)
+    door_bar_centred = bool(rng.random() < cfg.door_bar_centred_share)
+    door_bar_edge = float(rng.uniform(*cfg.door_bar_edge_range))
     floor_y = y0
 
     targets: list[Target] = []
@@ -687,10 +698,14 @@ def _build(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: fl
                 hy = (lo[1] + hi[1]) / 2 + door_handle_dy * door_h
             st = door_style
             if st.orientation == "horizontal":
-                # horizontal bar starts near the free edge
-                hx = free_x + inward * (0.025 + 0.5 * min(0.3, 0.5 * (lx1 - lx0)))
+                # a horizontal bar runs along the door's top (or bottom) edge, from near the free edge
+                # or centred across the door
+                if door_h < 0.9:  # (a tall door's bar stays about 1 m up)
+                    hy = hi[1] - door_bar_edge if door_bar_top else lo[1] + door_bar_edge
+                hx = (lx0 + lx1) / 2 if door_bar_centred else free_x + inward * (
+                    0.025 + 0.5 * min(0.3, 0.5 * (lx1 - lx0)))
             pieces, kind, orient = _make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
-            if orient == "horizontal":  # re-centre horizontally near the free edge with its real length
+            if orient == "horizontal" and not door_bar_centred:  # its real length, from near the free edge
                 bl, bh = _bounds_of(pieces)
                 shift = (free_x + inward * 0.025) - (bh[0] if hinge == "left" else bl[0])
                 pieces = [_translate(p, (shift, 0.0, 0.0)) for p in pieces]
