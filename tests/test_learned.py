@@ -160,6 +160,12 @@ def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     meta2 = train_cliport(out, ckpt, cfg, epochs=4, batch_size=4, lr=3e-3, max_train=4, progress=False, resume=True,
                           log=lambda s: None)
     assert [h["epoch"] for h in meta2["history"]] == list(range(1, 5))
+    # fine-tuning (--init) starts from the checkpoint's weights: its first epoch's loss is already low
+    tuned = tmp_path / "cliport_tuned.pt"
+    meta3 = train_cliport(out, tuned, cfg, epochs=1, batch_size=4, lr=1e-9, max_train=4, progress=False,
+                          init=ckpt, log=lambda s: None)
+    assert meta3["init"] == str(ckpt)
+    assert meta3["history"][0]["train_loss"] < losses[0]
 
 
 def test_detector_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):

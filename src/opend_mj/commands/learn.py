@@ -73,8 +73,8 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--depth/--no-depth", default=True, show_default=True,
               help="fasterrcnn (compact_fpn): read the depth relief as a fourth channel.")
 @click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="fasterrcnn: start from this detector checkpoint (fine-tuning; a one-class checkpoint "
-                   "seeds both kinds).")
+              help="Start from this checkpoint of the same solver (fine-tuning; for fasterrcnn a one-class "
+                   "checkpoint seeds both kinds).")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold,
@@ -103,7 +103,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
                                text_encoder=text_encoder)
         meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
-                               log=click.echo, **common)
+                               init=init, log=click.echo, **common)
     else:
         from opend_mj.policy.learned.detector import DetectorConfig
 

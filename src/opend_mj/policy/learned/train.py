@@ -263,12 +263,27 @@ def cliport_hits(prob: np.ndarray, box, pad: float = 0.0) -> bool:
     return box[0] - pad <= u <= box[2] + pad and box[1] - pad <= v <= box[3] + pad
 
 
+def init_from_checkpoint(model, checkpoint: Path | str, log: Callable[[str], None] = print) -> int:
+    """Load every tensor of a checkpoint's model whose name and shape fit ``model``; returns the count."""
+    import torch
+
+    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    src = {k: v.float() for k, v in src.get("model", src).items()}
+    own = model.state_dict()
+    loaded = {k: v for k, v in src.items() if k in own and own[k].shape == v.shape}
+    model.load_state_dict(loaded, strict=False)
+    log(f"init: {len(loaded)} of {len(own)} tensors from {checkpoint}")
+    return len(loaded)
+
+
 def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batch_size: int = 8, lr: float = 1e-3,
                   pos_weight: float = 20.0, max_minutes: float | None = None, resume: bool = False,
                   state_path: Path | None = None, device: str | None = None, progress: bool = True,
                   seed: int = 0, max_train: int | None = None, max_val: int | None = None,
-                  pretrained: Path | None = None, log: Callable[[str], None] = print) -> dict:
-    """Train the CLIPort-style affordance model; returns the checkpoint's metadata."""
+                  pretrained: Path | None = None, init: Path | None = None,
+                  log: Callable[[str], None] = print) -> dict:
+    """Train the CLIPort-style affordance model; returns the checkpoint's metadata. ``init``: start
+    from another CLIPort checkpoint of the same architecture (fine-tuning on new renders)."""
     import torch
     from tqdm import tqdm
 
@@ -292,6 +307,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     model = build_model(config)
     if pretrained and not resume:
         load_pretrained(model, pretrained, "cliport", log)
+    if init and not resume:
+        init_from_checkpoint(model, init, log)
     model = model.to(dev)
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
     loop = _Loop("cliport", out, state_path, epochs, max_minutes, progress, log)
@@ -344,7 +361,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val centre-in-box {row['val_centre_in_box']:.3f}  ({row['seconds']:.0f} s)")
         loop.save(epoch, model, opt, sched, {"config": asdict(config), "text": text.state(),
-                                             "data": str(data_dir), "pos_weight": pos_weight},
+                                             "data": str(data_dir), "pos_weight": pos_weight,
+                                             **({"init": str(init)} if init else {})},
                   metric="val_centre_in_box")
         if stopped:
             log(f"stopped: time limit of {max_minutes} min reached")
