@@ -418,6 +418,35 @@ def test_a_one_class_rgb_detector_seeds_a_two_kind_rgbd_one(tmp_path):
     assert torch.equal(cls[1], ref[1]) and torch.equal(cls[2], ref[1]) and torch.equal(cls[0], ref[0])
 
 
+def test_context_window_detector_starts_as_its_parent_and_reads_the_surroundings(tmp_path):
+    """--context: the box head also pools a window around each box; fine-tuned from a detector
+    without it, the new inputs start at zero weight, so the child scores every box as its parent."""
+    import torch
+    from dataclasses import asdict
+
+    from opend_mj.policy.learned.detector import (DetectorConfig, build_detector, context_boxes, detect_handles,
+                                                  init_from_detector)
+
+    torch.manual_seed(0)
+    parent_cfg = DetectorConfig(kinds=True, depth=True)
+    parent = build_detector(parent_cfg)
+    path = tmp_path / "parent.pt"
+    torch.save({"config": asdict(parent_cfg), "model": parent.state_dict()}, path)
+    child = build_detector(DetectorConfig(kinds=True, depth=True, context=True))
+    assert init_from_detector(child, path, log=lambda s: None) == len(parent.state_dict())
+    rgb = np.full((256, 256, 3), 120, np.uint8)
+    depth = _cabinet_depth()
+    boxes = np.array([[70.0, 68.0, 100.0, 76.0], [20.0, 200.0, 60.0, 230.0]])
+    parent.eval(), child.eval()
+    _, a = detect_handles(parent, rgb, boxes, depth=depth)
+    _, b = detect_handles(child, rgb, boxes, depth=depth)
+    assert np.allclose(a.handle, b.handle, atol=1e-5) and np.allclose(a.kind, b.kind, atol=1e-5)
+    # the window reaches beyond the box (more above and below than beside), within the image
+    win = context_boxes(torch.tensor([[70.0, 68.0, 100.0, 76.0], [0.0, 250.0, 10.0, 256.0]]), (256, 256))
+    assert win[0, 1] < 68 - 30 and win[0, 3] > 76 + 30 and 70 - 40 < win[0, 0] < 70 - 20
+    assert win[1, 0] == 0 and win[1, 3] == 256
+
+
 def test_depth_relief_marks_what_stands_proud():
     from opend_mj.policy.learned.detector import DetectorConfig, depth_relief, detector_input
 

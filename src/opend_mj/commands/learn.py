@@ -72,13 +72,16 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
               help="fasterrcnn: two handle classes (drawer, door), so a drawer is ranked among drawers.")
 @click.option("--depth/--no-depth", default=True, show_default=True,
               help="fasterrcnn (compact_fpn): read the depth relief as a fourth channel.")
+@click.option("--context/--no-context", default=False, show_default=True,
+              help="fasterrcnn (compact_fpn): the box head also reads the box's surroundings, so a bar along a "
+                   "door's edge is told from a drawer's.")
 @click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Start from this checkpoint of the same solver (fine-tuning; for fasterrcnn a one-class "
                    "checkpoint seeds both kinds).")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold,
-          pretrained, kinds, depth, init, progress):
+          pretrained, kinds, depth, context, init, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
@@ -109,7 +112,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
 
         cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
                              max_size=max(min_size, 640) if min_size else None, kinds=kinds,
-                             depth=depth and backbone == "compact_fpn")
+                             depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn")
         meta = T.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
                                   init=init, log=click.echo, **common)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")

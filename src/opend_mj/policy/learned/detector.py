@@ -156,6 +156,10 @@ class DetectorConfig:
     #: proud of its neighbourhood): a handle's shape in depth is the same on real and generated
     #: cabinets where its colour and texture are not. ``compact_fpn`` only.
     depth: bool = False
+    #: The box head also reads the box's surroundings (:class:`ContextRoIPool`): a horizontal bar
+    #: looks the same on a drawer and along a door's top edge; the panel around it (a seam just
+    #: above and a tall front below, or seams above and below) tells them apart. ``compact_fpn`` only.
+    context: bool = False
 
     @property
     def num_classes(self) -> int:
@@ -243,6 +247,48 @@ def compact_backbone(width: int = 32, out_channels: int = 64, in_channels: int =
     return Compact()
 
 
+#: How far (pixels) the context window reaches beyond a box: a fixed margin plus a share of the
+#: box's own size, per axis (horizontal, vertical); drawer fronts are 25-50 px tall at 256 px.
+CONTEXT_MARGIN = (24.0, 40.0)
+CONTEXT_SHARE = (0.25, 0.5)
+
+
+def context_boxes(boxes, image_size: tuple[int, int]):
+    """Each box (x0, y0, x1, y1) grown by ``CONTEXT_MARGIN`` + ``CONTEXT_SHARE`` of its size, clipped
+    to the image (``image_size`` = (H, W))."""
+    import torch
+
+    w, h = boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]
+    dx, dy = CONTEXT_MARGIN[0] + CONTEXT_SHARE[0] * w, CONTEXT_MARGIN[1] + CONTEXT_SHARE[1] * h
+    H, W = image_size
+    return torch.stack([(boxes[:, 0] - dx).clamp(0, W), (boxes[:, 1] - dy).clamp(0, H),
+                        (boxes[:, 2] + dx).clamp(0, W), (boxes[:, 3] + dy).clamp(0, H)], 1)
+
+
+def _context_pool(pool):
+    """A box RoI pool that returns, per box, the box's features and its context window's
+    (:func:`context_boxes`), stacked along the channels (the box head is twice as wide)."""
+    import torch
+    from torch import nn
+
+    class ContextRoIPool(nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.pool = pool
+
+        @property
+        def output_size(self):
+            return self.pool.output_size
+
+        def forward(self, features, proposals, image_shapes):
+            own = self.pool(features, proposals, image_shapes)
+            around = self.pool(features, [context_boxes(b, s) for b, s in zip(proposals, image_shapes)],
+                               image_shapes)
+            return torch.cat([own, around], 1)
+
+    return ContextRoIPool()
+
+
 def build_detector(config: DetectorConfig = DetectorConfig()):
     """A torchvision Faster R-CNN (2 classes) with random weights; see the module doc."""
     import torchvision
@@ -254,8 +300,9 @@ def build_detector(config: DetectorConfig = DetectorConfig()):
         raise ValueError(f"backbone must be one of {BACKBONES}, got {config.backbone!r}")
     if config.backbone == "compact_fpn":
         return _build_compact(config)
-    if config.depth:
-        raise ValueError(f"the depth channel needs the compact_fpn backbone, not {config.backbone!r}")
+    if config.depth or config.context:
+        raise ValueError(f"the depth channel and the context window need the compact_fpn backbone, "
+                         f"not {config.backbone!r}")
     builder = getattr(torchvision.models.detection, f"fasterrcnn_{config.backbone}")
     kwargs = {}
     if config.min_size is not None:
@@ -299,17 +346,23 @@ def _build_compact(config: "DetectorConfig"):
     ratios = (0.1, 0.25, 1.0, 4.0, 10.0)
     anchor = AnchorGenerator(((8, 16), (24, 40), (64, 96), (128, 192)), (ratios,) * 4)
     size = config.min_size or 256
+    pool = MultiScaleRoIAlign(["0", "1", "2"], output_size=7, sampling_ratio=2)
+    pooled = backbone.out_channels * 49
+    if config.context:
+        pooled = 2 * pooled
     model = FasterRCNN(
         backbone, num_classes=None, min_size=size, max_size=config.max_size or size, image_mean=mean, image_std=std,
         rpn_anchor_generator=anchor,
-        box_roi_pool=MultiScaleRoIAlign(["0", "1", "2"], output_size=7, sampling_ratio=2),
+        box_roi_pool=pool,
         rpn_fg_iou_thresh=0.5, rpn_bg_iou_thresh=0.3,
         rpn_pre_nms_top_n_train=config.rpn_train_top_n, rpn_post_nms_top_n_train=config.rpn_train_top_n,
         rpn_pre_nms_top_n_test=300, rpn_post_nms_top_n_test=300,
         box_batch_size_per_image=config.box_batch_per_image, box_positive_fraction=config.box_positive_fraction,
         box_score_thresh=config.box_score_thresh,
-        box_head=fr.TwoMLPHead(backbone.out_channels * 49, config.box_head_dim),
+        box_head=fr.TwoMLPHead(pooled, config.box_head_dim),
         box_predictor=fr.FastRCNNPredictor(config.box_head_dim, config.num_classes))
+    if config.context:  # (torchvision's constructor accepts only its own pool class)
+        model.roi_heads.box_roi_pool = _context_pool(pool)
     return model
 
 
@@ -341,8 +394,10 @@ def init_from_detector(model, checkpoint: Path | str, log=print) -> int:
             continue
         if own[k].shape == v.shape:
             loaded[k] = v
-        elif v.ndim == 4 and own[k].shape[1] > v.shape[1] and own[k].shape[0] == v.shape[0]:
-            w = torch.zeros_like(own[k])  # a first conv given more input channels: new ones start at zero
+        elif v.ndim in (2, 4) and own[k].shape[1] > v.shape[1] and own[k].shape[0] == v.shape[0]:
+            # a first conv given more input channels, a box head given the context window's features:
+            # the new inputs start at zero weight
+            w = torch.zeros_like(own[k])
             w[:, :v.shape[1]] = v
             loaded[k] = w
         elif k.endswith("cls_score.weight") or k.endswith("cls_score.bias"):
