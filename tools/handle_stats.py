@@ -33,7 +33,8 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
     out: dict[str, list[float]] = {k: [] for k in (
         "bar thickness (mm)", "bar length (mm)", "stand-off gap (mm)", "protrusion (mm)", "knob size (mm)",
         "handle height (m)", "nearest handle edge (mm)", "doors per cabinet", "drawers per cabinet",
-        "knobs (share)")}
+        "knobs (share)", "door handles that are horizontal bars (share)",
+        "of those, along the door's top or bottom edge (share)", "of those, centred across the door (share)")}
     for cab in cabinets:
         first = cab["targets"][0]["joint"]
         env = make_environment(EpisodeSpec(cabinets_dir / cab["path"], first, hand="franka", seed=0),
@@ -70,11 +71,28 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
             out["protrusion (mm)"].append(1000 * shape.protrusion)
             out["handle height (m)"].append(float(centres[t.joint][2]))
             out["nearest handle edge (mm)"].append(1000 * min(shape.clear.values()))
+        for t in _cabinet_json(cabinets_dir / cab["path"])["targets"]:  # door bars' placement, from the build
+            if t["type"] != "door" or "part_box_min" not in t:
+                continue
+            horizontal = t["handle"]["orientation"] == "horizontal"
+            out["door handles that are horizontal bars (share)"].append(float(horizontal))
+            if horizontal:
+                lo, hi, c = np.array(t["part_box_min"]), np.array(t["part_box_max"]), np.array(t["handle"]["center"])
+                across, up = (c[1:] - lo[1:]) / np.maximum(hi[1:] - lo[1:], 1e-6)
+                out["of those, along the door's top or bottom edge (share)"].append(float(up > 0.85 or up < 0.15))
+                out["of those, centred across the door (share)"].append(float(abs(across - 0.5) < 0.1))
         kinds = [t.kind for t in env.task.cabinet.targets]
         out["doors per cabinet"].append(float(kinds.count("door")))
         out["drawers per cabinet"].append(float(kinds.count("drawer")))
         env.close()
     return out
+
+
+def _cabinet_json(path: Path) -> dict:
+    import json
+
+    path = Path(path)
+    return json.loads(((path if path.is_dir() else path.parent) / "cabinet.json").read_text())
 
 
 def summary(values: list[float]) -> str:
