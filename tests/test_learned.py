@@ -270,6 +270,25 @@ def test_handle_proposals_find_the_bars_and_not_the_cabinet_corners():
     assert handle_proposals(block, _front_view()) == []
 
 
+def test_handle_proposals_on_a_narrow_front():
+    """A narrow cabinet front (36 px wide) framed by its carcass seen at an angle: the front's border
+    stands proud of neighbourhoods that take in the carcass, and the bar 6 px below its top edge
+    joins that border into one group far larger than a handle. The group is searched again against
+    its own depth, so the bar is still proposed (on the real train part such fronts hid 6 of the 191
+    named handles)."""
+    from opend_mj.policy.perception import ProposalConfig, handle_proposals
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[36:224, 96:160] = 2.05  # the carcass's top and sides, seen at an angle, 5 cm behind the front
+    depth[50:210, 110:146] = 2.0
+    depth[56:59, 116:140] = 1.97  # a bar 3 cm proud, 6 px below the front's top edge
+    boxes = [box for box, _ in handle_proposals(depth, _front_view())]
+    assert any(abs(u0 - 116) <= 1 and abs(u1 - 140) <= 1 and abs(v0 - 56) <= 1 and abs(v1 - 59) <= 1
+               for u0, v0, u1, v1 in boxes), boxes
+    assert len(boxes) == 1
+    assert handle_proposals(depth, _front_view(), ProposalConfig(split_groups=False)) == []
+
+
 def test_the_map_and_the_instruction_choose_among_proposals():
     from opend_mj.policy.learned.affordance import choose_proposal
     from opend_mj.policy.perception import handle_proposals

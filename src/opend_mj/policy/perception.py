@@ -318,6 +318,10 @@ class ProposalConfig:
     ring_fraction: float = 0.6
     max_short: float = 0.07
     max_long: float = 0.95
+    #: A group too large or not ringed by a panel (a narrow cabinet's whole front stands proud of a
+    #: window that reaches the room behind it, and the handle with it) is searched again against its
+    #: own median depth: the front it is part of.
+    split_groups: bool = True
 
 
 def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalConfig()) -> list[tuple]:
@@ -337,13 +341,7 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
     panel = np.repeat(np.repeat(coarse, s, axis=0), s, axis=1)[:h, :w]
     proud = (x < panel - config.min_protrusion) & (x > panel - config.max_protrusion)
     labels, _ = ndimage.label(proud, structure=np.ones((3, 3), bool))
-    out = []
-    for k, sl in enumerate(ndimage.find_objects(labels), 1):
-        if sl is None:
-            continue
-        mask = labels[sl] == k
-        if mask.sum() < config.min_pixels:
-            continue
+    def handle_like(labels, k, sl, mask) -> bool:
         if config.ring:
             r = config.ring
             v0, v1 = max(0, sl[0].start - r), min(h, sl[0].stop + r)
@@ -354,10 +352,31 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
             behind = x[v0:v1, u0:u1][ring]
             on_panel = (behind > front + config.min_protrusion / 2) & (behind < front + config.max_protrusion + 0.02)
             if behind.size == 0 or on_panel.mean() < config.ring_fraction:
-                continue
+                return False
         p = pts[sl][mask]
         short, long = sorted((float(np.ptp(p[:, 1])), float(np.ptp(p[:, 2]))))
-        if short > config.max_short or long > config.max_long:
+        return short <= config.max_short and long <= config.max_long
+
+    def groups(labels):
+        for k, sl in enumerate(ndimage.find_objects(labels), 1):
+            if sl is not None:
+                yield k, sl, labels[sl] == k
+
+    out = []
+    for k, sl, mask in groups(labels):
+        if mask.sum() < config.min_pixels:
             continue
-        out.append(((sl[1].start, sl[0].start, sl[1].stop, sl[0].stop), mask))
+        if handle_like(labels, k, sl, mask):
+            out.append(((sl[1].start, sl[0].start, sl[1].stop, sl[0].stop), mask))
+            continue
+        if not config.split_groups:
+            continue
+        # again, against the group's own median depth (the front the handle stands on)
+        front = float(np.median(x[sl][mask]))
+        inner = np.zeros((h, w), bool)
+        inner[sl] = mask & (x[sl] < front - config.min_protrusion) & (x[sl] > front - config.max_protrusion)
+        sub_labels, _ = ndimage.label(inner, structure=np.ones((3, 3), bool))
+        for j, sub_sl, sub_mask in groups(sub_labels):
+            if sub_mask.sum() >= config.min_pixels and handle_like(sub_labels, j, sub_sl, sub_mask):
+                out.append(((sub_sl[1].start, sub_sl[0].start, sub_sl[1].stop, sub_sl[0].stop), sub_mask))
     return out
