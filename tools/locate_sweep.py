@@ -53,7 +53,9 @@ def main() -> None:
     ap.add_argument("--frames", type=Path, required=True)
     ap.add_argument("--light-scale", type=float, default=1.0)
     ap.add_argument("--paraphrase", type=int, default=0)
-    ap.add_argument("--variant", action="append", required=True)
+    ap.add_argument("--variant", action="append", default=[])
+    ap.add_argument("--proposals", action="store_true",
+                    help="also print how often the depth proposals hold the named handle, and how many per image")
     ap.add_argument("--show-misses", action="store_true")
     args = ap.parse_args()
     import opend_mj.policy.perception as perception
@@ -73,6 +75,14 @@ def main() -> None:
         frames = render_frames(args.cabinets, args.split, args.light_scale, args.paraphrase)
         args.frames.parent.mkdir(parents=True, exist_ok=True)
         args.frames.write_bytes(pickle.dumps(frames))
+    if args.proposals:
+        held, counts = 0, []
+        for f in frames:
+            props = perception.handle_proposals(f["depth"], f["view"])
+            counts.append(len(props))
+            held += any(grade(box, f["joint"], f["boxes"]) == "located" for box, _ in props)
+        print(f"proposals: the named handle among them in {100.0 * held / max(1, len(frames)):.1f} % of "
+              f"{len(frames)} images, {sum(counts) / max(1, len(counts)):.2f} per image", flush=True)
     for text in args.variant:
         name, options = parse_variant(text)
         solver = get_solver(name, **options)
