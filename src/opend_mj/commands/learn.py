@@ -72,7 +72,7 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
               help="fasterrcnn: two handle classes (drawer, door), so a drawer is ranked among drawers.")
 @click.option("--depth/--no-depth", default=True, show_default=True,
               help="fasterrcnn (compact_fpn): read the depth relief as a fourth channel.")
-@click.option("--context/--no-context", default=False, show_default=True,
+@click.option("--context/--no-context", default=True, show_default=True,
               help="fasterrcnn (compact_fpn): the box head also reads the box's surroundings, so a bar along a "
                    "door's edge is told from a drawer's.")
 @click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
