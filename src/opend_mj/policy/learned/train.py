@@ -265,10 +265,9 @@ def cliport_hits(prob: np.ndarray, box, pad: float = 0.0) -> bool:
 
 def init_from_checkpoint(model, checkpoint: Path | str, log: Callable[[str], None] = print) -> int:
     """Load every tensor of a checkpoint's model whose name and shape fit ``model``; returns the count."""
-    import torch
+    from opend_mj.policy.learned.detector import checkpoint_tensors
 
-    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    src = {k: v.float() for k, v in src.get("model", src).items()}
+    src = checkpoint_tensors(checkpoint)
     own = model.state_dict()
     loaded = {k: v for k, v in src.items() if k in own and own[k].shape == v.shape}
     model.load_state_dict(loaded, strict=False)
