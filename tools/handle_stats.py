@@ -25,6 +25,7 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
     from opend_mj.policy.perception import estimate_handle, measure_handle
     from opend_mj.policy.planner import PlannerConfig
     from opend_mj.policy.handle import HandleBox
+    from opend_mj.sim.cabinet import load_cabinet_info
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
@@ -71,7 +72,7 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
             out["protrusion (mm)"].append(1000 * shape.protrusion)
             out["handle height (m)"].append(float(centres[t.joint][2]))
             out["nearest handle edge (mm)"].append(1000 * min(shape.clear.values()))
-        for t in _cabinet_json(cabinets_dir / cab["path"])["targets"]:  # door bars' placement, from the build
+        for t in load_cabinet_info(cabinets_dir / cab["path"])["targets"]:  # door bars' placement, from the build
             if t["type"] != "door" or "part_box_min" not in t:
                 continue
             horizontal = t["handle"]["orientation"] == "horizontal"
@@ -86,13 +87,6 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
         out["drawers per cabinet"].append(float(kinds.count("drawer")))
         env.close()
     return out
-
-
-def _cabinet_json(path: Path) -> dict:
-    import json
-
-    path = Path(path)
-    return json.loads(((path if path.is_dir() else path.parent) / "cabinet.json").read_text())
 
 
 def summary(values: list[float]) -> str:

@@ -373,9 +373,11 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
             continue
         # again, against the group's own median depth (the front the handle stands on)
         front = float(np.median(x[sl][mask]))
-        inner = np.zeros((h, w), bool)
-        inner[sl] = mask & (x[sl] < front - config.min_protrusion) & (x[sl] > front - config.max_protrusion)
-        sub_labels, _ = ndimage.label(inner, structure=np.ones((3, 3), bool))
+        inner = mask & (x[sl] < front - config.min_protrusion) & (x[sl] > front - config.max_protrusion)
+        if inner.sum() < config.min_pixels:  # (most rejected groups: nothing stands out of them)
+            continue
+        sub_labels = np.zeros((h, w), np.int32)
+        sub_labels[sl], _ = ndimage.label(inner, structure=np.ones((3, 3), bool))
         for j, sub_sl, sub_mask in groups(sub_labels):
             if sub_mask.sum() >= config.min_pixels and handle_like(sub_labels, j, sub_sl, sub_mask):
                 out.append(((sub_sl[1].start, sub_sl[0].start, sub_sl[1].stop, sub_sl[0].stop), sub_mask))

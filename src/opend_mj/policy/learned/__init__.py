@@ -17,6 +17,15 @@ if "triton" not in _sys.modules and not _os.environ.get("OPEND_ALLOW_TRITON"):
 _LOADED: dict = {}
 
 
+def checkpoint_tensors(checkpoint) -> dict:
+    """A checkpoint's model tensors as float32 (a training checkpoint's ``model`` entry, or a bare
+    state dict), for fine-tuning from it."""
+    import torch
+
+    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    return {k: v.float() for k, v in src.get("model", src).items()}
+
+
 def load_checkpoint(checkpoint, default, what: str, train_command: str, build, device=None):
     """``(model in eval mode on device, config, checkpoint dict)``, cached per path and device.
 

@@ -378,21 +378,14 @@ def detector_targets(record: dict, device=None, kinds: bool = False) -> dict:
     return {"boxes": b, "labels": torch.tensor(labels, dtype=torch.int64, device=device)}
 
 
-def checkpoint_tensors(checkpoint: Path | str) -> dict:
-    """A checkpoint's model tensors as float32 (a training checkpoint's ``model`` entry, or a bare
-    state dict), for fine-tuning from it."""
-    import torch
-
-    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    return {k: v.float() for k, v in src.get("model", src).items()}
-
-
 def init_from_detector(model, checkpoint: Path | str, log=print) -> int:
     """Start a detector from another detector checkpoint's weights (fine-tuning): every tensor whose
     shape fits; a one-class checkpoint's handle row seeds each kind row of a two-kind model (class
     scores and box regression), so a kinds model starts as good a detector as its parent. Returns
     the tensors loaded."""
     import torch
+
+    from opend_mj.policy.learned import checkpoint_tensors
 
     src = checkpoint_tensors(checkpoint)
     own = model.state_dict()

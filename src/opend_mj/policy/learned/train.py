@@ -265,7 +265,7 @@ def cliport_hits(prob: np.ndarray, box, pad: float = 0.0) -> bool:
 
 def init_from_checkpoint(model, checkpoint: Path | str, log: Callable[[str], None] = print) -> int:
     """Load every tensor of a checkpoint's model whose name and shape fit ``model``; returns the count."""
-    from opend_mj.policy.learned.detector import checkpoint_tensors
+    from opend_mj.policy.learned import checkpoint_tensors
 
     src = checkpoint_tensors(checkpoint)
     own = model.state_dict()
