@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opend_mj.policy.learned.detector import match_instruction
+from opend_mj.policy.learned.detector import consistent_choice, match_instruction
 
 # --------------------------------------------------------------------------------------------------
 # Matching detections to instructions (Algorithm 1 on box centres): no torch, no rendering
@@ -44,6 +44,20 @@ def test_missing_detection_falls_back_to_nearest_rank():
     boxes = [_box(128, 60), _box(128, 150)]
     assert match_instruction(boxes, "bottom drawer") == 1
     assert match_instruction(boxes, "top drawer") == 0
+
+
+def test_instruction_settles_uncertain_kind_calls():
+    # Two door handles side by side; the detector is unsure the right one is a door (0.45).
+    boxes = [_box(60, 100, 4, 20), _box(190, 100, 4, 20)]
+    # "right door" says two doors side by side: the unsure call is overturned, the right one named.
+    assert consistent_choice(boxes, [0.9, 0.45], "right door") == 1
+    assert consistent_choice(boxes, [0.9, 0.45], "left door") == 0
+    # "door" says one door in view: the surer call wins.
+    assert consistent_choice(boxes, [0.9, 0.45], "door") == 0
+    assert consistent_choice(boxes, [0.3, 0.45], "door") == 1
+    # A sure call is never overturned: no consistent reading, the caller falls back.
+    assert consistent_choice(boxes, [0.999, 0.001], "right door") is None
+    assert consistent_choice([], [], "door") is None
 
 
 def _front_view():

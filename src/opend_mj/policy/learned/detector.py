@@ -22,8 +22,11 @@ instructed kind (door or drawer, read from the instruction's last word), their c
 into a :class:`opend_mj.language.TargetLayout` (with depth and camera: the world point on the
 handle, +y = viewer's left, z up, the same frame and tolerance as the dataset's instructions;
 without them: image u -> horizontal (image-left = viewer's left), v -> vertical, tolerance in
-pixels), Algorithm 1 labels them, and the detection labelled with the instruction wins. If the
-detections cannot be labelled (too many levels, ties) or none matches, the detection whose
+pixels), Algorithm 1 labels them, and the detection labelled with the instruction wins. With a
+kinds detector the door / drawer calls are read together with the instruction
+(:func:`consistent_choice`): the instruction says how the named kind is laid out ("door": one door
+in view; "right door": several side by side), so unsure calls that contradict it are overturned. If
+the detections cannot be labelled (too many levels, ties) or none matches, the detection whose
 (row, column) rank is nearest the instruction's is taken.
 """
 
@@ -126,6 +129,53 @@ def match_instruction(boxes, instruction: str, depth: np.ndarray | None = None, 
         if best_cost is None or cost < best_cost:
             best, best_cost = i, cost
     return best
+
+
+def consistent_choice(boxes, probability, instruction: str, depth: np.ndarray | None = None, camera_view=None,
+                      config: LanguageConfig = LanguageConfig(), max_flips: int = 3, max_uncertain: int = 12,
+                      certain: float = 0.98, pixel_tolerance: float = 6.0) -> int | None:
+    """Index of the named handle when the kind calls are read together with the instruction.
+
+    ``probability`` (N,) is each candidate's probability of being a handle of the instructed kind.
+    The instruction says something of the whole set: "door" means one door in view, "left door"
+    two or more side by side with the named one leftmost, and so on (Algorithm 1's labels). The
+    most probable set of the instructed kind (sum of log-odds kept) whose Algorithm 1 description
+    names exactly one member as the instruction does is chosen, changing at most ``max_flips``
+    of the ``max_uncertain`` least certain calls (none surer than ``certain`` either way); that
+    member's index, or None if no such set.
+    """
+    from itertools import combinations
+
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    if not len(boxes):
+        return None
+    named = describe_instruction(instruction)
+    pts = box_layout_points(boxes, depth, camera_view)
+    metric = depth is not None and camera_view is not None
+    lang = LanguageConfig(level_tolerance=config.level_tolerance if metric else pixel_tolerance,
+                          vertical_labels=config.vertical_labels, horizontal_labels=config.horizontal_labels)
+    p = np.clip(np.asarray(probability, float), 1e-4, 1 - 1e-4)
+    base = p >= 0.5
+    cost = np.abs(np.log(p / (1 - p)))
+    limit = math.log(certain / (1 - certain))
+    uncertain = [int(i) for i in np.argsort(cost, kind="stable")[:max_uncertain] if cost[i] <= limit]
+    flips = [c for k in range(max_flips + 1) for c in combinations(uncertain, k)]
+    flips.sort(key=lambda c: float(sum(cost[i] for i in c)))
+    for flip in flips:
+        members = base.copy()
+        members[list(flip)] ^= True
+        idx = np.nonzero(members)[0]
+        if not len(idx):
+            continue
+        layout = [TargetLayout(key=str(i), kind=named.kind, y=float(pts[i, 0]), z=float(pts[i, 1])) for i in idx]
+        try:
+            desc = describe(layout, lang)
+        except LanguageInvalid:
+            continue
+        hits = [int(k) for k, d in desc.items() if (d.vertical, d.horizontal) == (named.vertical, named.horizontal)]
+        if len(hits) == 1:
+            return hits[0]
+    return None
 
 
 def box_orientation(box) -> str:
@@ -532,6 +582,13 @@ class MatchConfig:
     #: while its drawer / door call on a depth proposal holds (real train part: 80.6 % located
     #: without kinds, 85.9 % with them; 42.9 % on the detections alone).
     depth_verified: bool = True
+    #: With a kinds detector, read the kind calls together with the instruction
+    #: (:func:`consistent_choice`) before falling back to the kind threshold and Algorithm 1's
+    #: nearest rank. ``handle_weight``: the exponent of the handle probability in the probability
+    #: that a candidate is a handle of the instructed kind (0: the kind call alone).
+    consistent: bool = True
+    handle_weight: float = 0.0
+    certain: float = 0.98
 
 
 def select_handle(found: Detections, proposals: Detections | None, instruction: str, depth=None,
@@ -564,6 +621,11 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
     if not len(boxes):
         return None
     named = describe_instruction(instruction)
+    if config.consistent and kind.shape[1] > 1 and named.kind in KIND_LABELS:
+        p = kind[:, KIND_LABELS[named.kind] - 1] * np.clip(handle, 1e-4, 1.0) ** config.handle_weight
+        i = consistent_choice(boxes, p, instruction, depth, camera_view, certain=config.certain)
+        if i is not None:
+            return boxes[i], float(handle[i])
     if kind.shape[1] > 1 and named.kind in KIND_LABELS:
         of_kind = kind[:, KIND_LABELS[named.kind] - 1] >= config.kind_threshold
         if of_kind.any():
