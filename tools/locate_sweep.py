@@ -19,12 +19,13 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
-def render_frames(cabinets: Path, split: str, light_scale: float = 1.0, paraphrase: int = 0) -> list[dict]:
+def render_frames(cabinets: Path, split: str, light_scale: float = 1.0, paraphrase: int = 0,
+                  seed: int = 0) -> list[dict]:
     from tqdm import tqdm
 
     from opend_mj.evaluation.locate import locate_frames, locate_jobs
 
-    jobs = locate_jobs(cabinets, split, 0, light_scale, paraphrase)
+    jobs = locate_jobs(cabinets, split, seed, light_scale, paraphrase)
     return [dict(cabinet=job.cabinet, joint=job.joint, kind=task.target.kind, instruction=task.instruction,
                  rgb=rgb, depth=depth, view=view, boxes=boxes)
             for job, task, rgb, depth, view, boxes in tqdm(locate_frames(jobs), total=len(jobs), desc="render",
@@ -53,6 +54,7 @@ def main() -> None:
     ap.add_argument("--frames", type=Path, required=True)
     ap.add_argument("--light-scale", type=float, default=1.0)
     ap.add_argument("--paraphrase", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="episode seed of the rendered scenes (room, camera, light)")
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--proposals", action="store_true",
                     help="also print how often the depth proposals hold the named handle, and how many per image")
@@ -72,7 +74,7 @@ def main() -> None:
     if args.frames.exists():
         frames = pickle.loads(args.frames.read_bytes())
     else:
-        frames = render_frames(args.cabinets, args.split, args.light_scale, args.paraphrase)
+        frames = render_frames(args.cabinets, args.split, args.light_scale, args.paraphrase, args.seed)
         args.frames.parent.mkdir(parents=True, exist_ok=True)
         args.frames.write_bytes(pickle.dumps(frames))
     if args.proposals:
