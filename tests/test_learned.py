@@ -151,6 +151,30 @@ def test_data_format(tiny_data):
     assert 0 < colours < 8 or True  # random; the 50 % rule is statistical
 
 
+def test_plain_views_show_the_cabinet_light_grey(tmp_path):
+    """`--plain-prob`: a view of a plain cabinet shows every cabinet surface one light grey (as an
+    untextured PartNet-Mobility cabinet compiles), the rest of the scene as without it."""
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
+    from opend_mj.policy.learned.data import DataConfig, load_images, load_records, make_dataset
+
+    result = compile_cabinet(generate_source(1, 0, tmp_path / "sources"), tmp_path / "cabinets")  # red and dark
+    assert result.status in ("built", "cached"), result.message
+    views = {}
+    for prob in (0.0, 1.0):
+        config = DataConfig(n_images=1, views_per_scene=1, val_fraction=0.0, colour_prob=0.0, plain_prob=prob)
+        out = tmp_path / f"plain{prob}"
+        make_dataset(tmp_path / "cabinets", out, config, workers=1, progress=False, cabinet_ids=[result.id])
+        (record,) = load_records(out)
+        views[prob] = (record, load_images(out, record)[0].astype(int))
+    (own, own_rgb), (plain, plain_rgb) = views[0.0], views[1.0]
+    assert own["plain_grey"] is None and 0.7 <= plain["plain_grey"] <= 1.0
+    changed = np.abs(own_rgb - plain_rgb).sum(-1) > 12
+    assert changed.sum() > 2000, "the cabinet did not change colour"
+    spread = plain_rgb[changed].max(-1) - plain_rgb[changed].min(-1)
+    assert np.median(spread) <= 3, "a plain cabinet is grey"
+
+
 def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     from opend_mj.policy.learned.affordance import AffordanceConfig, CLIPortSolver
     from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
@@ -301,6 +325,19 @@ def test_handle_proposals_on_a_narrow_front():
                for u0, v0, u1, v1 in boxes), boxes
     assert len(boxes) == 1
     assert handle_proposals(depth, _front_view(), ProposalConfig(split_groups=False)) == []
+
+
+def test_handle_proposals_drop_what_the_image_border_cuts():
+    """A 1 px sliver at the image's right edge stands proud like a bar (on real renders: the room's
+    furniture cut by the frame); "bottom drawer" once landed on such slivers below the drawers."""
+    from opend_mj.policy.perception import ProposalConfig, handle_proposals
+
+    depth = _cabinet_depth()
+    depth[150:158, 254:256] = depth[150:158, 250:252] - 0.03
+    boxes = [box for box, _ in handle_proposals(depth, _front_view())]
+    assert len(boxes) == 2 and all(u1 < 256 for _, _, u1, _ in boxes), boxes
+    kept = [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(drop_border=False))]
+    assert len(kept) == 3, kept
 
 
 def test_the_map_and_the_instruction_choose_among_proposals():
