@@ -22,18 +22,21 @@ DEFAULT_DATA = Path("out/handle-data")
 @click.option("--size", "image_size", type=int, default=256, show_default=True)
 @click.option("--max-shift", type=float, default=0.10, show_default=True, help="Camera shift per axis (m).")
 @click.option("--colour-prob", type=float, default=0.5, show_default=True, help="Chance of a random handle colour.")
+@click.option("--plain-prob", type=float, default=0.0, show_default=True,
+              help="Chance that a view shows the cabinet plain light grey, as untextured PartNet-Mobility "
+                   "cabinets compile.")
 @click.option("--val-fraction", type=float, default=0.2, show_default=True)
 @click.option("--views-per-scene", type=int, default=4, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--workers", type=int, default=2, show_default=True)
 @click.option("--progress/--no-progress", default=True)
-def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_prob, val_fraction, views_per_scene,
-              seed, workers, progress):
+def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_prob, plain_prob, val_fraction,
+              views_per_scene, seed, workers, progress):
     """Render labelled training images (handle boxes, instructions, affordance masks)."""
     from opend_mj.policy.learned.data import DataConfig, make_dataset
 
     config = DataConfig(n_images=n_images, image_size=image_size, max_shift=max_shift, colour_prob=colour_prob,
-                        val_fraction=val_fraction, views_per_scene=views_per_scene, seed=seed, split=split)
+                        plain_prob=plain_prob, val_fraction=val_fraction, views_per_scene=views_per_scene, seed=seed, split=split)
     info = make_dataset(cabinets_dir, out, config, workers=workers, progress=progress)
     click.echo(f"{info['images']} images in {out} ({info['subsets']}), {info['targets']} targets, "
                f"{info['seconds']:.0f} s")

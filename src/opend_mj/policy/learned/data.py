@@ -3,7 +3,9 @@
 As in the OpenD paper: front-camera renders of the training cabinets at 256 x 256, the camera
 shifted by up to 10 cm along each axis, a 50 % chance of a random handle colour, randomised rooms
 (room type, furniture, floor, walls and lights all follow the scene seed) and a mild light scale;
-1740 images by default, 80 % train / 20 % validation. Validation cabinets are held out whole
+optionally views of the cabinet plain light grey (``DataConfig.plain_prob``, off by default: most
+real cabinets compile untextured, one light grey, but the shipped checkpoints were not improved by
+it); 1740 images by default, 80 % train / 20 % validation. Validation cabinets are held out whole
 (the split is by cabinet, drawn from a seeded hash), so validation measures unseen cabinets.
 
 On-disk format (version 1), one folder::
@@ -19,7 +21,7 @@ A record of labels.jsonl::
     {"id": 123, "subset": "train" | "val" | "test", "cabinet": "proc_0007",
      "rgb": "rgb/000123.png", "depth": "depth/000123.png", "mask": "mask/000123.png",
      "width": 256, "height": 256, "room": 4, "seed": 991, "light_scale": 1.07,
-     "camera_shift": [dx, dy, dz], "handle_colour": [r, g, b] | null,
+     "camera_shift": [dx, dy, dz], "handle_colour": [r, g, b] | null, "plain_grey": g | null,
      "camera": {"fx", "fy", "cx", "cy", "pos": [3], "rot": [[3 x 3]]},
      "targets": [{"joint", "type": "door" | "drawer", "instruction", "vertical", "horizontal",
                   "orientation": "horizontal" | "vertical", "box": [u0, v0, u1, v1] | null,
@@ -62,6 +64,12 @@ class DataConfig:
     image_size: int = 256
     max_shift: float = 0.10  # metres, per axis, uniform
     colour_prob: float = 0.5
+    #: Chance that a view shows the cabinet plain: every visual geom one light grey (level drawn from
+    #: ``plain_grey``), as a PartNet-Mobility cabinet without textures compiles (measured on the
+    #: real train part's renders: 95 % of fronts unsaturated, luminance 0.27-0.35; generated
+    #: fronts: 42 % unsaturated, median luminance 0.21).
+    plain_prob: float = 0.0
+    plain_grey: tuple[float, float] = (0.7, 1.0)
     val_fraction: float = 0.2
     views_per_scene: int = 4  # camera shifts / colours per built scene (one room each)
     light_range: tuple[float, float] = (0.85, 1.15)
@@ -151,6 +159,9 @@ def render_scene(job: SceneJob) -> list[dict]:
         all_ids = [g for ids in geom_ids for g in ids]
         group0 = np.array(model.geom_group[all_ids])
         rgba0 = np.array(model.geom_rgba[all_ids])
+        visual_ids = [i for i in range(model.ngeom)
+                      if (model.id2name(i, "geom") or "").startswith("cabinet/vis_") and model.geom_matid[i] < 0]
+        visual_rgba0 = np.array(model.geom_rgba[visual_ids])
         seg_option = mujoco.MjvOption()
         seg_option.geomgroup[:] = [0, 0, 0, 1, 0, 0]  # cabinet collision geoms + handles only
         with RGBDCamera(physics, task.camera.full_identifier, cfg.image_size, cfg.image_size) as cam:
@@ -167,6 +178,11 @@ def render_scene(job: SceneJob) -> list[dict]:
                 is_geom = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
                 for i, ids in enumerate(geom_ids):
                     mask[is_geom & np.isin(seg[..., 0], ids)] = i + 1
+                model.geom_rgba[visual_ids] = visual_rgba0
+                plain = None
+                if cfg.plain_prob > 0 and rng.random() < cfg.plain_prob:  # (no draw when off: same data as before)
+                    plain = round(float(rng.uniform(*cfg.plain_grey)), 4)
+                    model.geom_rgba[visual_ids] = [plain, plain, plain, 1.0]
                 colour = None
                 if rng.random() < cfg.colour_prob:
                     colour = [float(x) for x in rng.uniform(0, 1, size=3)]
@@ -186,6 +202,7 @@ def render_scene(job: SceneJob) -> list[dict]:
                     "width": cfg.image_size, "height": cfg.image_size,
                     "room": task.arena.room, "seed": job.seed, "light_scale": round(light, 4),
                     "camera_shift": [round(float(x), 5) for x in shift], "handle_colour": colour,
+                    "plain_grey": plain,
                     "camera": {"fx": k_.fx, "fy": k_.fy, "cx": k_.cx, "cy": k_.cy,
                                "pos": [float(x) for x in view.pos], "rot": np.asarray(view.rot).tolist()},
                     "targets": [{
@@ -198,6 +215,7 @@ def render_scene(job: SceneJob) -> list[dict]:
                 })
             model.geom_group[all_ids] = group0
             model.geom_rgba[all_ids] = rgba0
+            model.geom_rgba[visual_ids] = visual_rgba0
     finally:
         env.close()
     return records
