@@ -110,7 +110,7 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
         found = solver.solve(rgb, depth, task.instruction, view)
         box = list(found.as_tuple()) if found is not None else None
         refined = box
-        if found is not None and not getattr(solver, "exact", False):
+        if found is not None and not getattr(solver, "exact", False) and not found.from_depth:
             refined = list(refine_box_with_depth(found, depth, view).as_tuple())
         gt = boxes.get(job.joint)
         records.append(LocateRecord(

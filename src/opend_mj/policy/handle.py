@@ -22,6 +22,9 @@ class HandleBox:
     v1: float
     orientation: str | None = None  # "horizontal" | "vertical" | None (let the planner decide)
     score: float = 1.0
+    #: The box is a handle group found in depth already (a depth proposal): the planner does not
+    #: snap it to depth again.
+    from_depth: bool = False
 
     @property
     def centre(self) -> tuple[float, float]:

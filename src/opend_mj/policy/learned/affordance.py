@@ -317,7 +317,7 @@ class CLIPortSolver:
             chosen = choose_proposal(prob, handle_proposals(depth, camera_view), instruction, depth, camera_view,
                                      self.plausible_fraction, self.heat_sigma)
             if chosen is not None:
-                return HandleBox(*chosen, orientation=None, score=float(prob.max()))
+                return HandleBox(*chosen, orientation=None, score=float(prob.max()), from_depth=True)
         _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
         return HandleBox(*box, orientation=orientation, score=peak)
 

@@ -674,5 +674,6 @@ class FasterRCNNSolver:
         if chosen is None:
             return None
         b, score = chosen
+        from_depth = self.match.depth_verified and extra is not None and len(extra) > 0
         return HandleBox(float(b[0]), float(b[1]), float(b[2]), float(b[3]), orientation=box_orientation(b),
-                         score=score)
+                         score=score, from_depth=from_depth)
