@@ -33,12 +33,13 @@ the detections cannot be labelled (too many levels, ties) or none matches, the d
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from opend_mj.language import (
+    Description,
     LanguageConfig,
     LanguageInvalid,
     TargetLayout,
@@ -89,6 +90,27 @@ def box_layout_points(boxes: np.ndarray, depth: np.ndarray | None = None, camera
     return np.asarray(out, float)
 
 
+def _layout_language(depth, camera_view, config: LanguageConfig, pixel_tolerance: float) -> LanguageConfig:
+    """Algorithm 1's labels with the level tolerance of the frame the box layout is in (metres with
+    depth and a camera view, else pixels)."""
+    metric = depth is not None and camera_view is not None
+    return LanguageConfig(level_tolerance=config.level_tolerance if metric else pixel_tolerance,
+                          vertical_labels=config.vertical_labels, horizontal_labels=config.horizontal_labels)
+
+
+def _named_member(pts: np.ndarray, members, named: Description, lang: LanguageConfig) -> int | None:
+    """The one of ``members`` (indices into ``pts``, taken as handles of the ``named`` kind) that
+    Algorithm 1 describes as ``named``; None if they cannot all be described, or if none or several
+    read so."""
+    layout = [TargetLayout(key=str(i), kind=named.kind, y=float(pts[i, 0]), z=float(pts[i, 1])) for i in members]
+    try:
+        desc = describe(layout, lang)
+    except LanguageInvalid:
+        return None
+    hits = [int(k) for k, d in desc.items() if (d.vertical, d.horizontal) == (named.vertical, named.horizontal)]
+    return hits[0] if len(hits) == 1 else None
+
+
 def match_instruction(boxes, instruction: str, depth: np.ndarray | None = None, camera_view=None,
                       scores=None, config: LanguageConfig = LanguageConfig(),
                       pixel_tolerance: float = 6.0) -> int | None:
@@ -100,20 +122,14 @@ def match_instruction(boxes, instruction: str, depth: np.ndarray | None = None, 
     if len(boxes) == 0:
         return None
     scores = np.ones(len(boxes)) if scores is None else np.asarray(scores, float)
-    vertical, horizontal, kind = astuple(describe_instruction(instruction))
+    named = describe_instruction(instruction)
+    vertical, horizontal = named.vertical, named.horizontal
     pts = box_layout_points(boxes, depth, camera_view)
-    metric = depth is not None and camera_view is not None
-    tol = config.level_tolerance if metric else pixel_tolerance
-    lang = LanguageConfig(level_tolerance=tol, vertical_labels=config.vertical_labels,
-                          horizontal_labels=config.horizontal_labels)
-    layout = [TargetLayout(key=str(i), kind=kind, y=float(p[0]), z=float(p[1])) for i, p in enumerate(pts)]
-    try:
-        desc = describe(layout, lang)
-        hits = [int(k) for k, d in desc.items() if (d.vertical, d.horizontal) == (vertical, horizontal)]
-        if len(hits) == 1:
-            return hits[0]
-    except LanguageInvalid:
-        pass
+    lang = _layout_language(depth, camera_view, config, pixel_tolerance)
+    tol = lang.level_tolerance
+    hit = _named_member(pts, range(len(boxes)), named, lang)
+    if hit is not None:
+        return hit
     # nearest by rank: rows from the top, columns from the left within the row
     rows = levels(list(pts[:, 1]), tol, descending=True)
     n_rows = max(rows) + 1
@@ -151,9 +167,7 @@ def consistent_choice(boxes, probability, instruction: str, depth: np.ndarray | 
         return None
     named = describe_instruction(instruction)
     pts = box_layout_points(boxes, depth, camera_view)
-    metric = depth is not None and camera_view is not None
-    lang = LanguageConfig(level_tolerance=config.level_tolerance if metric else pixel_tolerance,
-                          vertical_labels=config.vertical_labels, horizontal_labels=config.horizontal_labels)
+    lang = _layout_language(depth, camera_view, config, pixel_tolerance)
     p = np.clip(np.asarray(probability, float), 1e-4, 1 - 1e-4)
     base = p >= 0.5
     cost = np.abs(np.log(p / (1 - p)))
@@ -165,16 +179,9 @@ def consistent_choice(boxes, probability, instruction: str, depth: np.ndarray | 
         members = base.copy()
         members[list(flip)] ^= True
         idx = np.nonzero(members)[0]
-        if not len(idx):
-            continue
-        layout = [TargetLayout(key=str(i), kind=named.kind, y=float(pts[i, 0]), z=float(pts[i, 1])) for i in idx]
-        try:
-            desc = describe(layout, lang)
-        except LanguageInvalid:
-            continue
-        hits = [int(k) for k, d in desc.items() if (d.vertical, d.horizontal) == (named.vertical, named.horizontal)]
-        if len(hits) == 1:
-            return hits[0]
+        hit = _named_member(pts, idx, named, lang) if len(idx) else None
+        if hit is not None:
+            return hit
     return None
 
 
