@@ -94,7 +94,7 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
     """Grade ``solver_name`` on every target of ``split``; writes the records to ``out`` (JSONL) if given."""
     from tqdm import tqdm
 
-    from opend_mj.policy.perception import refine_box_with_depth
+    from opend_mj.policy.perception import refine_box_with_depth, snaps_to_depth
     from opend_mj.policy.solvers import get_solver, needs_ground_truth
 
     jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit)
@@ -110,7 +110,7 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
         found = solver.solve(rgb, depth, task.instruction, view)
         box = list(found.as_tuple()) if found is not None else None
         refined = box
-        if found is not None and not getattr(solver, "exact", False) and not found.from_depth:
+        if snaps_to_depth(solver, found):
             refined = list(refine_box_with_depth(found, depth, view).as_tuple())
         gt = boxes.get(job.joint)
         records.append(LocateRecord(

@@ -127,6 +127,12 @@ def _ray_plane_x(view, u: float, v: float, x: float) -> np.ndarray:
     return view.pos + t * d
 
 
+def snaps_to_depth(solver, box: HandleBox | None) -> bool:
+    """Whether a solver's box is to be snapped to depth (:func:`refine_box_with_depth`): not the
+    oracle's exact boxes, nor a box that is a depth proposal already."""
+    return box is not None and not getattr(solver, "exact", False) and not box.from_depth
+
+
 def refine_box_with_depth(box: HandleBox, depth: np.ndarray, view, margin_px: int = 12,
                           min_protrusion: float = 0.015, max_protrusion: float = 0.08) -> HandleBox:
     """Snap a solver's box to the handle that stands out of the panel in the depth image.

@@ -39,6 +39,7 @@ from opend_mj.policy.perception import (
     measure_handle,
     one_of_paired_handles,
     refine_box_with_depth,
+    snaps_to_depth,
 )
 from opend_mj.sim.hands import (
     HANDS_DIR,
@@ -490,8 +491,7 @@ class Planner:
         cfg = self.config
         self._stage(result, "locate")
         box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
-        if (box is not None and cfg.refine_with_depth and not getattr(self.solver, "exact", False)
-                and not box.from_depth):
+        if cfg.refine_with_depth and snaps_to_depth(self.solver, box):
             result.events.append({"solver_box": box.to_dict()})
             box = refine_box_with_depth(box, obs.depth, obs.camera_view)
         if box is not None and cfg.one_of_paired_handles:

@@ -159,8 +159,9 @@ def render_scene(job: SceneJob) -> list[dict]:
         all_ids = [g for ids in geom_ids for g in ids]
         group0 = np.array(model.geom_group[all_ids])
         rgba0 = np.array(model.geom_rgba[all_ids])
-        visual_ids = [i for i in range(model.ngeom)
-                      if (model.id2name(i, "geom") or "").startswith("cabinet/vis_") and model.geom_matid[i] < 0]
+        visual_ids = [i for i in range(model.ngeom)  # the cabinet's untextured visual geoms, for plain views
+                      if cfg.plain_prob > 0 and (model.id2name(i, "geom") or "").startswith("cabinet/vis_")
+                      and model.geom_matid[i] < 0]
         visual_rgba0 = np.array(model.geom_rgba[visual_ids])
         seg_option = mujoco.MjvOption()
         seg_option.geomgroup[:] = [0, 0, 0, 1, 0, 0]  # cabinet collision geoms + handles only
