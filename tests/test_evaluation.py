@@ -105,3 +105,22 @@ def test_a_coarser_physics_timestep_is_recorded_and_keyed_apart(drawer_cabinet, 
     assert rec["physics_timestep"] == pytest.approx(1 / 120)
     assert rec["success"] and not rec["physics_warnings"]
     assert episode_key(rec) == coarse.key() != default.key()
+
+
+def test_a_runs_cabinets_stand_in_rooms_the_seed_and_cabinet_draw(tmp_path):
+    """Each cabinet of a run gets its own scene from (seed, cabinet): the run covers several rooms,
+    a cabinet's targets and hands share one, and the same seed gives the same rooms again."""
+    from opend_mj.evaluation.episode import scene_seed
+    from opend_mj.sim.task import EpisodeSpec
+
+    def room(cabinet, joint="joint_0", hand="franka", seed=0):
+        job = EpisodeJob(cabinet=cabinet, cabinet_dir=str(tmp_path / cabinet), joint=joint, split="test",
+                         hand=hand, solver="oracle", seed=seed)
+        return EpisodeSpec(Path(job.cabinet_dir), joint, hand, seed=scene_seed(job)).room_index()
+
+    cabinets = [f"proc_{i:04d}" for i in range(40)]
+    rooms = [room(c) for c in cabinets]
+    assert len(set(rooms)) >= 6  # of nine: one seed no longer means one room
+    assert rooms == [room(c) for c in cabinets]
+    assert all(room(c, "joint_3", "shadow") == r for c, r in zip(cabinets, rooms))
+    assert [room(c, seed=1) for c in cabinets] != rooms

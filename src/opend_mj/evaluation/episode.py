@@ -7,6 +7,7 @@ scene (`scene_key`) and the video file name (`video_name`) are all derived from 
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import asdict, dataclass
 from typing import Any, Callable
 
@@ -105,6 +106,14 @@ def scene_key(job: EpisodeJob) -> tuple:
     """Episodes with the same key share one compiled scene (room, cabinet, hand, physics)."""
     record = asdict(job)
     return (job.cabinet_dir, job.room) + tuple(f.normalise(f.value(record)) for f in EPISODE_FIELDS if f.in_scene)
+
+
+def scene_seed(job: EpisodeJob) -> int:
+    """The seed of a job's scene (which room, its furniture, materials and light): the episode seed
+    and the cabinet together, so that a run's cabinets are seen in rooms as varied as the seeds give
+    (with the episode seed alone, every cabinet of a run stood in the same room). A cabinet's targets
+    and hands share its scene; another ``--seed`` gives every cabinet another one."""
+    return zlib.crc32(f"{int(job.seed)}/{job.cabinet}".encode()) & 0x7FFFFFFF
 
 
 def record_fields(job: EpisodeJob) -> dict:

@@ -23,7 +23,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 
-from opend_mj.evaluation.episode import EpisodeJob, record_fields  # noqa: E402
+from opend_mj.evaluation.episode import EpisodeJob, record_fields, scene_seed  # noqa: E402
 from opend_mj.evaluation.grading import failure_stage  # noqa: E402
 from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder  # noqa: E402
 
@@ -142,7 +142,7 @@ def make_episode_env(job: EpisodeJob):
     from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
     spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
-                          seed=job.seed, room=job.room, instruction=instruction_for(job))
+                          seed=scene_seed(job), room=job.room, instruction=instruction_for(job))
     config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
     if job.physics_timestep is not None:
         config = replace(config, physics_timestep=float(job.physics_timestep))
