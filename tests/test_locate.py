@@ -40,3 +40,20 @@ def test_oracle_locates_every_target_and_records_are_written(small_dataset, tmp_
     overall = next(r for r in rows if r["kind"] == "overall")
     assert overall["targets"] == 4 and overall["located"] == 100.0 and overall["wrong_handle"] == 0.0
     assert "| oracle | overall | 4 | 100.0 |" in format_summary(rows)
+
+
+def test_several_seeds_are_pooled_with_each_seeds_rate(small_dataset, tmp_path):
+    """`opend evaluate-solver --seed 0 --seed 1`: the same targets in two scene draws, pooled, with
+    one file per seed and each seed's rate in the table."""
+    from click.testing import CliRunner
+
+    from opend_mj.cli import main
+
+    out = tmp_path / "loc.jsonl"
+    result = CliRunner().invoke(main, ["evaluate-solver", "--solver", "oracle", "--cabinets", str(small_dataset),
+                                       "--split", "all", "--limit", "2", "--seed", "0", "--seed", "1",
+                                       "--no-progress", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    per_seed = [[json.loads(line) for line in (tmp_path / f"loc_s{k}.jsonl").read_text().splitlines()] for k in (0, 1)]
+    assert [len(p) for p in per_seed] == [2, 2] and {r["seed"] for r in per_seed[1]} == {1}
+    assert "| oracle | overall | 4 | 100.0 |" in result.output and "100 / 100 |" in result.output

@@ -189,20 +189,28 @@ def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, callback=_check_cabinets)
 @click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", "seeds", type=int, multiple=True, default=(0,), show_default=True,
+              help="Episode seed: each cabinet's room, light and camera. Repeat to pool several draws of "
+                   "the same targets (the table adds each seed's rate).")
 @click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
 @click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True)
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write one JSON line per target and solver here.")
+              help="Write one JSON line per target and solver here (one file per solver and seed when "
+                   "there are several: <stem>_<solver>_s<seed>.jsonl).")
 @click.option("--progress/--no-progress", default=True)
-def evaluate_solver(solvers, cabinets_dir, split, seed, light_scale, paraphrase, limit, out, progress):
+def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase, limit, out, progress):
     """Locate rate of handle solvers: render each target's scene once, grade the solver's box (no episodes)."""
     from opend_mj.evaluation.locate import evaluate_locate, format_summary, summarise
 
+    seeds = tuple(dict.fromkeys(seeds))
     records = []
     for solver in solvers:
-        part = None if out is None else out.with_name(f"{out.stem}_{solver}{out.suffix}") if len(solvers) > 1 else out
-        records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
-                                   paraphrase=paraphrase, limit=limit, progress=progress, out=part)
+        for seed in seeds:
+            part = out
+            if out is not None and (len(solvers) > 1 or len(seeds) > 1):
+                tags = ([solver] if len(solvers) > 1 else []) + ([f"s{seed}"] if len(seeds) > 1 else [])
+                part = out.with_name("_".join([out.stem, *tags]) + out.suffix)
+            records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
+                                       paraphrase=paraphrase, limit=limit, progress=progress, out=part)
     click.echo(format_summary(summarise(records)))

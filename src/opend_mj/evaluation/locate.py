@@ -131,7 +131,10 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
 
 
 def summarise(records: list[LocateRecord]) -> list[dict]:
-    """Rates per (solver, kind): located, wrong handle, missed; raw box and after depth refinement."""
+    """Rates per (solver, kind): located, wrong handle, missed; raw box and after depth refinement.
+
+    Records of several episode seeds (the same targets in other rooms, light and camera) are pooled:
+    ``targets`` counts views, and ``located_by_seed`` holds each seed's own located rate."""
     rows = []
     solvers = sorted({r.solver for r in records})
     for solver in solvers:
@@ -144,7 +147,10 @@ def summarise(records: list[LocateRecord]) -> list[dict]:
             def pct(field: str, verdict: str) -> float:
                 return round(100.0 * sum(getattr(r, field) == verdict for r in rs) / n, 1)
 
-            rows.append({"solver": solver, "kind": kind, "targets": n,
+            seeds = sorted({r.seed for r in rs})
+            by_seed = [round(100.0 * sum(r.verdict == "located" for r in rs if r.seed == k)
+                             / sum(r.seed == k for r in rs), 1) for k in seeds]
+            rows.append({"solver": solver, "kind": kind, "targets": n, "seeds": seeds, "located_by_seed": by_seed,
                          "located": pct("verdict", "located"), "wrong_handle": pct("verdict", "wrong_handle"),
                          "missed": pct("verdict", "missed"),
                          "located_refined": pct("verdict_refined", "located"),
@@ -153,9 +159,15 @@ def summarise(records: list[LocateRecord]) -> list[dict]:
 
 
 def format_summary(rows: list[dict]) -> str:
-    lines = ["| solver | kind | targets | located % | wrong handle % | missed % | located after depth snap % | "
-             "wrong handle after snap % |", "|---|---|---|---|---|---|---|---|"]
+    """A Markdown table of :func:`summarise`'s rows; with several seeds, a column of each seed's rate."""
+    several = any(len(r.get("seeds", ())) > 1 for r in rows)
+    head = ("| solver | kind | targets | located % | wrong handle % | missed % | located after depth snap % | "
+            "wrong handle after snap % |")
+    lines = [head + (" located per seed % |" if several else ""), "|---" * (9 if several else 8) + "|"]
     for r in rows:
-        lines.append(f"| {r['solver']} | {r['kind']} | {r['targets']} | {r['located']} | {r['wrong_handle']} | "
-                     f"{r['missed']} | {r['located_refined']} | {r['wrong_handle_refined']} |")
+        line = (f"| {r['solver']} | {r['kind']} | {r['targets']} | {r['located']} | {r['wrong_handle']} | "
+                f"{r['missed']} | {r['located_refined']} | {r['wrong_handle_refined']} |")
+        if several:
+            line += " " + " / ".join(f"{x:g}" for x in r["located_by_seed"]) + " |"
+        lines.append(line)
     return "\n".join(lines)
