@@ -65,7 +65,9 @@ def _check_cabinets(ctx, param, value):
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, callback=_check_cabinets)
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", "seeds", type=int, multiple=True, default=(0,), show_default=True,
+              help="Episode seed: each cabinet's room, light and camera. Repeat to run every episode "
+                   "in several draws of the scenes (one record per seed; `opend score` pools them).")
 @click.option("--video", "video_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Write an MP4 per episode here.")
 @click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
@@ -83,7 +85,7 @@ def _check_cabinets(ctx, param, value):
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.pass_context
-def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seed, video_dir, light_scale,
+def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seeds, video_dir, light_scale,
         pull, paraphrase, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
@@ -120,8 +122,10 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
             raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
     elif policy_args:
         raise click.UsageError("--policy-arg needs --policy")
-    jobs = make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale, pull=pull,
-                     limit=limit, video_dir=video_dir, paraphrase=paraphrase, physics_timestep=physics_timestep)
+    jobs = [job for seed in dict.fromkeys(seeds)
+            for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
+                                 pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
+                                 physics_timestep=physics_timestep)]
     if policy_spec is not None:
         jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if not jobs:
