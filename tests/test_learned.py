@@ -336,8 +336,24 @@ def test_handle_proposals_drop_what_the_image_border_cuts():
     depth[150:158, 254:256] = depth[150:158, 250:252] - 0.03
     boxes = [box for box, _ in handle_proposals(depth, _front_view())]
     assert len(boxes) == 2 and all(u1 < 256 for _, _, u1, _ in boxes), boxes
-    kept = [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(drop_border=False))]
+    kept = [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(drop_border=False,
+                                                                                     front_band=0))]
     assert len(kept) == 3, kept
+
+
+def test_handle_proposals_drop_the_rooms_furniture_beside_the_cabinet():
+    """A desk's side 40 cm behind the cabinet's front, beside it, with a bar-like rail 3 cm proud of
+    it (on real renders: a desk's leg, a shelf's edge): handle-like, but not on the cabinet's front,
+    so it is no candidate (CLIPort's map once chose such a leg for "door")."""
+    from opend_mj.policy.perception import ProposalConfig, handle_proposals
+
+    depth = _cabinet_depth()
+    depth[100:200, 222:252] = 2.4  # the desk's side, in front of the wall, beside the cabinet
+    depth[120:160, 234:237] = 2.37  # a rail on it, 3 cm proud
+    boxes = sorted(box for box, _ in handle_proposals(depth, _front_view()))
+    assert len(boxes) == 2 and all(u1 <= 216 for _, _, u1, _ in boxes), boxes
+    kept = [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(front_band=0))]
+    assert len(kept) == 3 and any(u0 >= 230 for u0, _, _, _ in kept), kept
 
 
 def test_the_map_and_the_instruction_choose_among_proposals():
