@@ -359,16 +359,16 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
     panel = np.repeat(np.repeat(coarse, s, axis=0), s, axis=1)[:h, :w]
     proud = (x < panel - config.min_protrusion) & (x > panel - config.max_protrusion)
     labels, _ = ndimage.label(proud, structure=np.ones((3, 3), bool))
-    def handle_like(labels, k, sl, mask) -> bool:
+    def handle_like(labels, k, sl, mask, group_x: float) -> bool:
         if config.ring:
             r = config.ring
             v0, v1 = max(0, sl[0].start - r), min(h, sl[0].stop + r)
             u0, u1 = max(0, sl[1].start - r), min(w, sl[1].stop + r)
             own = labels[v0:v1, u0:u1] == k
             ring = ndimage.binary_dilation(own, iterations=r) & ~own
-            front = float(np.median(x[sl][mask]))
             behind = x[v0:v1, u0:u1][ring]
-            on_panel = (behind > front + config.min_protrusion / 2) & (behind < front + config.max_protrusion + 0.02)
+            on_panel = (behind > group_x + config.min_protrusion / 2) & \
+                       (behind < group_x + config.max_protrusion + 0.02)
             if behind.size == 0 or on_panel.mean() < config.ring_fraction:
                 return False
         p = pts[sl][mask]
@@ -376,40 +376,40 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
         return short <= config.max_short and long <= config.max_long
 
     def groups(labels):
+        """(label, slice, mask, the group's median world x) of each group of ``min_pixels`` or more
+        that the border does not cut."""
         for k, sl in enumerate(ndimage.find_objects(labels), 1):
             if sl is None:
                 continue
             if config.drop_border and (sl[0].start == 0 or sl[1].start == 0 or sl[0].stop == h or sl[1].stop == w):
                 continue
-            yield k, sl, labels[sl] == k
+            mask = labels[sl] == k
+            if mask.sum() >= config.min_pixels:
+                yield k, sl, mask, float(np.median(x[sl][mask]))
 
     cabinet_front = None
     if config.front_band > 0:
         centre = x[int(h * 0.3):int(h * 0.7), int(w * 0.35):int(w * 0.65)]
         cabinet_front = float(np.percentile(centre, 20)) if centre.size else None
 
-    def on_front(sl, mask) -> bool:
-        return cabinet_front is None or abs(float(np.median(x[sl][mask])) - cabinet_front) <= config.front_band
+    def on_front(group_x: float) -> bool:
+        return cabinet_front is None or abs(group_x - cabinet_front) <= config.front_band
 
     out = []
-    for k, sl, mask in groups(labels):
-        if mask.sum() < config.min_pixels:
-            continue
-        if handle_like(labels, k, sl, mask):
-            if on_front(sl, mask):
+    for k, sl, mask, group_x in groups(labels):
+        if handle_like(labels, k, sl, mask, group_x):
+            if on_front(group_x):
                 out.append(((sl[1].start, sl[0].start, sl[1].stop, sl[0].stop), mask))
             continue
         if not config.split_groups:
             continue
         # again, against the group's own median depth (the front the handle stands on)
-        front = float(np.median(x[sl][mask]))
-        inner = mask & (x[sl] < front - config.min_protrusion) & (x[sl] > front - config.max_protrusion)
+        inner = mask & (x[sl] < group_x - config.min_protrusion) & (x[sl] > group_x - config.max_protrusion)
         if inner.sum() < config.min_pixels:  # (most rejected groups: nothing stands out of them)
             continue
         sub_labels = np.zeros((h, w), np.int32)
         sub_labels[sl], _ = ndimage.label(inner, structure=np.ones((3, 3), bool))
-        for j, sub_sl, sub_mask in groups(sub_labels):
-            if sub_mask.sum() >= config.min_pixels and handle_like(sub_labels, j, sub_sl, sub_mask) \
-                    and on_front(sub_sl, sub_mask):
+        for j, sub_sl, sub_mask, sub_x in groups(sub_labels):
+            if handle_like(sub_labels, j, sub_sl, sub_mask, sub_x) and on_front(sub_x):
                 out.append(((sub_sl[1].start, sub_sl[0].start, sub_sl[1].stop, sub_sl[0].stop), sub_mask))
     return out
