@@ -570,3 +570,37 @@ def test_depth_verified_candidates_drop_an_edge_the_detector_takes_for_a_handle(
     # the detections alone (the paper's way) take the seam for the bottom drawer
     box, _ = select_handle(found, None, "bottom drawer", config=MatchConfig(depth_verified=False))
     assert np.allclose(box, seam)
+
+
+def test_a_handle_seen_to_be_a_door_is_not_the_named_drawer():
+    """Two drawers called sure drawers and a door's bar called a drawer too: "bottom drawer" lands on
+    the door's bar (the lowest of the three). Once the robot has pulled that bar and seen it swing
+    (``observed``), it is a door's whatever the image said, and the bottom drawer is the lower drawer."""
+    from opend_mj.policy.learned.detector import MatchConfig, select_handle
+
+    boxes = [_box(128, 40), _box(128, 80), _box(128, 170)]
+    found = _detections(boxes, [0.95] * 3, [[0.99, 0.01], [0.99, 0.01], [0.99, 0.01]])
+    cfg = MatchConfig(use_proposals=False)
+    assert np.allclose(select_handle(found, None, "bottom drawer", config=cfg)[0], boxes[2])
+    seen = ((tuple(boxes[2]), "door"),)
+    assert np.allclose(select_handle(found, None, "bottom drawer", config=cfg, observed=seen)[0], boxes[1])
+    assert np.allclose(select_handle(found, None, "top drawer", config=cfg, observed=seen)[0], boxes[0])
+
+
+def test_the_map_gives_up_a_handle_seen_to_be_of_the_other_kind():
+    """CLIPort's map favours the top-left bar for "door"; once that bar has been seen to slide out
+    like a drawer's, the other bar is the door."""
+    from opend_mj.policy.learned.affordance import choose_proposal
+    from opend_mj.policy.perception import handle_proposals
+
+    depth, view = _cabinet_depth(), _front_view()
+    proposals = handle_proposals(depth, view)
+    prob = np.zeros((256, 256), np.float32)
+    prob[60:80, 60:110] = 0.9
+    prob[150:190, 175:190] = 0.2
+    first = choose_proposal(prob, proposals, "door", depth, view)
+    assert first[0] < 128 and first[1] < 128
+    second = choose_proposal(prob, proposals, "door", depth, view, observed=((first, "drawer"),))
+    assert second[0] > 128 and second[1] > 128
+    # a handle seen to be of the named kind stays a candidate
+    assert choose_proposal(prob, proposals, "door", depth, view, observed=((first, "door"),)) == first

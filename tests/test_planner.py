@@ -214,3 +214,75 @@ def test_real_door_held_past_36_degrees(real_cabinet):
         if len(opened) >= 2:
             break
     assert len(opened) >= 2, opened
+
+
+def test_kind_from_the_held_path():
+    """A drawer's handle slides straight; a door's swings on a circle about its hinge; a flap's tips
+    down and out. Short paths say nothing."""
+    from opend_mj.policy.planner import Planner, PlannerConfig
+
+    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    s = np.linspace(0.0, 0.15, 60)
+    straight = np.stack([0.5 - s, np.full_like(s, 0.1), np.full_like(s, 0.6)], 1)
+    assert planner.kind_from_track(list(straight))[0] == "drawer"
+    assert planner.kind_from_track(list(straight[:20]))[0] is None  # 5 cm: too short to tell
+    r = 0.4  # a door 40 cm wide hinged at y = -0.3
+    phi = s / r
+    arc = np.stack([0.5 - r * np.sin(phi), -0.3 + r * np.cos(phi), np.full_like(s, 0.6)], 1)
+    kind, turn, _ = planner.kind_from_track(list(arc))
+    assert kind == "door" and 12.0 < turn < 22.0, turn
+    r = 0.2  # a flap 20 cm tall hinged at its bottom edge (tilt: hands sag up to ~20 degrees on drawers)
+    flap = np.stack([0.5 - r * np.sin(s / r), np.full_like(s, 0.1), 0.2 + r * np.cos(s / r)], 1)
+    assert planner.kind_from_track(list(flap))[0] == "door"
+
+
+class _WrongKindFirst:
+    """A learned-like solver whose first answer is the door's handle for a drawer instruction, and
+    the named drawer's handle once told that the first one swung like a door."""
+
+    name = "wrong_kind_first"
+    needs_ground_truth = False
+    accepts_observed = True
+    boxes: dict = {}
+    calls: list = []
+
+    def solve(self, rgb, depth, instruction, camera_view, observed=()):
+        from opend_mj.policy.handle import HandleBox
+
+        type(self).calls.append(tuple(observed))
+        box = self.boxes["door"] if not observed else self.boxes["drawer"]
+        return HandleBox(*box)
+
+
+@pytest.mark.slow
+def test_a_handle_that_swings_when_a_drawer_was_named_is_put_back_and_the_drawer_opened(tmp_path):
+    """proc_0024 holds a drawer (joint_0) and a door (joint_1). The solver first names the door's
+    handle for "drawer": the pull sees the handle swing, takes it back, lets go, asks the solver
+    again with what it saw, and opens the drawer. The door ends where it started (not opened)."""
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
+    from opend_mj.evaluation.episode import EpisodeJob
+    from opend_mj.evaluation.runner import run_episode
+    from opend_mj.policy.solvers import register_solver
+
+    src = generate_source(24, 0, tmp_path / "src")
+    compile_cabinet(src, tmp_path / "built", cache_dir=tmp_path / "cache")
+    cab = tmp_path / "built" / "proc_0024"
+
+    def job(joint, solver):
+        return EpisodeJob(cabinet="proc_0024", cabinet_dir=str(cab), joint=joint, split="train", hand="shadow",
+                          solver=solver, use_grasp_file=False)
+
+    door = run_episode(job("joint_1", "oracle"))  # the door's handle box, in the same scene
+    assert door["target_type"] == "door" and door["success"], door
+    drawer = run_episode(job("joint_0", "oracle"))
+    assert drawer["target_type"] == "drawer" and drawer["success"], drawer
+    _WrongKindFirst.boxes = {"door": door["gt_box"], "drawer": drawer["gt_box"]}
+    _WrongKindFirst.calls = []
+    register_solver("wrong_kind_first", _WrongKindFirst, overwrite=True)
+    rec = run_episode(job("joint_0", "wrong_kind_first"))
+    assert "error" not in rec, rec.get("error")
+    assert [w["kind"] for w in rec["wrong_kind"]] == ["door"], rec["wrong_kind"]
+    assert len(_WrongKindFirst.calls) == 2 and _WrongKindFirst.calls[1][0][1] == "door"
+    assert rec["success"] and rec["open_ratio"] > 0.2, rec
+    assert rec["others_moved"] == [], rec["others_moved"]

@@ -260,6 +260,8 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         "grasp_style": plan.grasp_style or None,
         "handle_shape": plan.shape,
         "pushed": bool(plan.pushed),
+        "wrong_kind": list(plan.wrong_kind),
+        "kind_seen": [[e["kind_seen"], e["turn_deg"], e["tilt_deg"]] for e in plan.events if "kind_seen" in e],
         "verify": [e["verify"] for e in plan.events if "verify" in e],
         "turned_deg": round(plan.turned_deg, 2),
         "sim_seconds": round(float(physics.data.time), 3),

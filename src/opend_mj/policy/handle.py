@@ -46,7 +46,12 @@ class HandleBox:
 
 
 class HandleSolver(Protocol):
-    """What the planner needs from a handle solver."""
+    """What the planner needs from a handle solver.
+
+    A solver may also take ``observed=((box, kind), ...)`` in :meth:`solve` (and say so with a class
+    attribute ``accepts_observed = True``): handles the robot has pulled and seen the kind of by
+    their motion ("drawer": slid out, "door": swung). The planner asks such a solver again after a
+    handle of the other kind than the instruction's."""
 
     name: str
 

@@ -208,6 +208,32 @@ class PlannerConfig:
     hinge_radius_range: tuple = (0.12, 1.2)
     hinge_disagree_deg: float = 40.0
     hinge_check_distance: float = 0.03
+    #: Kind seen in the pull (learned solvers only: the oracle's box is the named handle). Once the
+    #: held handle travelled ``kind_check_distance`` (m), its path tells its kind: a drawer slides
+    #: straight, a door's handle swings on a circle. The turn (deg) between the path's first and
+    #: last ``kind_chord`` (m) at or above ``kind_door_turn`` is a door's, at or below
+    #: ``kind_drawer_turn`` a drawer's. A handle of the other kind than the instruction's is the
+    #: wrong one: it is pushed back, let go, and the solver is asked again with what was seen
+    #: (``solver.solve(..., observed=...)``), at most ``max_target_tries`` handles per episode.
+    verify_kind: bool = True
+    kind_check_distance: float = 0.12
+    kind_chord: float = 0.03
+    kind_door_turn: float = 6.0
+    kind_drawer_turn: float = 2.0
+    kind_door_tilt: float = 30.0
+    kind_drawer_tilt: float = 10.0
+    #: a turn above this (deg) within ``kind_check_distance`` is no door's (its hinge would be less
+    #: than ~17 cm from the handle) but a hand sliding along its bar: unclear (two drawers of the
+    #: real train part's oracle pulls turned 38-81 degrees so, one of them a broken cabinet)
+    kind_door_turn_max: float = 30.0
+    #: the kinds whose sighting gives a handle up. Only "door" (a drawer was named, the handle
+    #: swung): on the real train part's oracle pulls (764) the path of 2 of 284 drawers turned
+    #: 6 degrees or more (one a broken cabinet), while 4-10 % of the doors per hand moved straight
+    #: within 1 degree for 12 cm (a hand sliding along its bar), so "drawer" is only logged.
+    kind_retry_on: tuple = ("door",)
+    max_target_tries: int = 2
+    #: time (s) a new handle needs (approach, grasp, a pull)
+    retarget_time: float = 6.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -322,6 +348,9 @@ class PlanResult:
     grasp_style: str = ""
     shape: dict | None = None  # the handle as measured in depth
     pushed: bool = False  # a lost door was pushed open from inside
+    #: handles given up because their motion showed the other kind than the instruction's:
+    #: [{"box": [...], "kind": "door" | "drawer"}, ...]
+    wrong_kind: list = field(default_factory=list)
     events: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
@@ -367,6 +396,10 @@ class PullState:
     angle0: float = 0.0
     sense: float = 0.0
     opened: float = 0.0  # the largest door angle (deg) reached while the grip held
+    #: the site's path while held in the latest pull, and the kind (and turn, deg) it showed
+    pull_track: list = field(default_factory=list)
+    seen_kind: str | None = None
+    seen_turn: float = 0.0
 
 
 class Planner:
@@ -375,7 +408,10 @@ class Planner:
     Stages (each a method): :meth:`locate` (solver box -> 3D handle), :meth:`perceive` (shape from
     depth), :meth:`choose_grasp`, :meth:`approach`, :meth:`close_and_verify` (touch sensors: does
     the hand hold?), :meth:`pull` (until done or the grip slips), :meth:`recover` (back off and
-    grasp again; a door that started to open and was lost is pushed open from inside)."""
+    grasp again; a door that started to open and was lost is pushed open from inside). With a
+    learned solver, a handle whose pull shows the other kind than the instruction's (a drawer was
+    named and the handle swings like a door's) is taken back, let go, and the solver asked again
+    with what was seen (:meth:`kind_from_track`, :meth:`push_back`)."""
 
     def __init__(self, solver: HandleSolver, spec: HandSpec, config: PlannerConfig = PlannerConfig(),
                  grasp: GraspProfile | None = None, on_stage: Callable[[str, dict], None] | None = None):
@@ -426,44 +462,30 @@ class Planner:
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         result.target_kind = target_kind(obs.instruction)
-
+        observed: tuple = ()
         handle, box = self.locate(robot, obs, result)
         if handle is None:
             result.failed_stage = "locate"
             self._hold_until_min_time(robot, None)
             return result
-        shape = self.perceive(handle, box, obs, result)
-        grasp = self.choose_grasp(handle, shape, obs, result)
-        door = result.target_kind == "door" and cfg.pull == "arc"
-        state = PullState(quat0=grasp.quat)
-        status = "not_held"
-        for attempt in range(cfg.max_grasp_tries):
-            if attempt > 0 and self._time_left(robot) < cfg.attempt_time:
+        while True:
+            status, state, grasp = self.open_handle(robot, obs, handle, box, result)
+            if status != "wrong_kind":
                 break
-            grasp.attempt = attempt
-            if attempt > 0:
-                result.regrasps += 1
-            self.approach(robot, grasp, result, first=attempt == 0)
-            if not self.close_and_verify(robot, grasp, result):
+            # the handle moved as the other kind: push it back, let go, ask the solver again
+            seen = state.seen_kind
+            observed = observed + ((box.as_tuple(), seen),)
+            result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
+                                      "turn_deg": round(state.seen_turn, 1)})
+            self.push_back(robot, grasp, state)
+            if len(observed) >= cfg.max_target_tries or self._time_left(robot) < cfg.retarget_time:
                 status = "not_held"
-                self.back_off(robot, grasp)
-                grasp = self.next_grasp(grasp, handle, shape, state, result)
-                continue
-            status = self.pull(robot, grasp, door, state, result)
-            if status == "slipped" and (abs(state.turned) >= cfg.door_done_deg if door
-                                        else state.travelled >= cfg.drawer_done):
-                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
-            if status == "done":
                 break
-            if door and cfg.push_recovery:
-                arc = self.door_arc(state)
-                if arc is not None and math.degrees(arc[4]) >= cfg.push_min_turn:
-                    self.back_off(robot, grasp)
-                    break  # an opened door is pushed open from inside (below), not grasped again
-            self.back_off(robot, grasp)
-            grasp = self.next_grasp(grasp, handle, shape, state, result)
-        if door and status != "done" and cfg.push_recovery:
-            self.recover_door(robot, state, result)
+            new_handle, new_box = self.locate(robot, obs, result, observed)
+            if new_handle is None or any(_same_box(new_box.as_tuple(), b) for b, _ in observed):
+                status = "not_held"
+                break
+            handle, box = new_handle, new_box
         result.pulled = state.travelled
         result.turned_deg = state.turned
         result.grasp_style = grasp.style
@@ -486,11 +508,98 @@ class Planner:
             result.failed_stage = "pull"
         return result
 
-    def locate(self, robot: Robot, obs: Observation, result: PlanResult):
-        """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle."""
+    def open_handle(self, robot: Robot, obs: Observation, handle, box, result: PlanResult):
+        """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
+        pull state, last grasp); status "done", "slipped", "not_held" or "wrong_kind" (its motion
+        showed the other kind than the instruction's)."""
+        cfg = self.config
+        shape = self.perceive(handle, box, obs, result)
+        grasp = self.choose_grasp(handle, shape, obs, result)
+        door = result.target_kind == "door" and cfg.pull == "arc"
+        state = PullState(quat0=grasp.quat)
+        status = "not_held"
+        for attempt in range(cfg.max_grasp_tries):
+            if attempt > 0 and self._time_left(robot) < cfg.attempt_time:
+                break
+            grasp.attempt = attempt
+            if attempt > 0:
+                result.regrasps += 1
+            self.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind)
+            if not self.close_and_verify(robot, grasp, result):
+                status = "not_held"
+                self.back_off(robot, grasp)
+                grasp = self.next_grasp(grasp, handle, shape, state, result)
+                continue
+            status = self.pull(robot, grasp, door, state, result)
+            if status == "wrong_kind":
+                return status, state, grasp
+            if status == "slipped" and (abs(state.turned) >= cfg.door_done_deg if door
+                                        else state.travelled >= cfg.drawer_done):
+                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
+            if status == "done":
+                break
+            if door and cfg.push_recovery:
+                arc = self.door_arc(state)
+                if arc is not None and math.degrees(arc[4]) >= cfg.push_min_turn:
+                    self.back_off(robot, grasp)
+                    break  # an opened door is pushed open from inside (below), not grasped again
+            self.back_off(robot, grasp)
+            grasp = self.next_grasp(grasp, handle, shape, state, result)
+        if door and status != "done" and cfg.push_recovery:
+            self.recover_door(robot, state, result)
+        return status, state, grasp
+
+    def checks_kind(self) -> bool:
+        """Whether pulls watch the handle's kind: a learned solver that can be asked again."""
+        return (self.config.verify_kind and not getattr(self.solver, "needs_ground_truth", False)
+                and getattr(self.solver, "accepts_observed", False))
+
+    def kind_from_track(self, track: list) -> tuple[str | None, float | None, float | None]:
+        """(kind, turn, tilt) of a held handle's path (site positions): the turn (deg) between the
+        path's first and last ``kind_chord`` seen from above, the tilt (deg) between them seen from
+        the side. "drawer" for a path straight both ways, "door" for one that turns (a side-hinged
+        door) or tilts much (a flap hinged at its bottom edge), None where too short or unclear."""
+        cfg = self.config
+        pts = np.asarray(track, float)
+        if len(pts) < 3:
+            return None, None, None
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        if s[-1] < cfg.kind_check_distance:
+            return None, None, None
+        i0 = int(np.searchsorted(s, cfg.kind_chord))
+        i1 = int(np.searchsorted(s, s[-1] - cfg.kind_chord, side="right")) - 1
+        d0, d1 = pts[i0] - pts[0], pts[-1] - pts[max(0, i1)]
+        h0, h1 = float(np.linalg.norm(d0[:2])), float(np.linalg.norm(d1[:2]))
+        if h0 < 1e-6 or h1 < 1e-6:
+            return None, None, None
+        turn = abs(math.degrees(math.atan2(d0[0] * d1[1] - d0[1] * d1[0], float(d0[:2] @ d1[:2]))))
+        tilt = abs(math.degrees(math.atan2(d1[2], h1) - math.atan2(d0[2], h0)))
+        if cfg.kind_door_turn <= turn <= cfg.kind_door_turn_max or tilt >= cfg.kind_door_tilt:
+            return "door", turn, tilt
+        if turn <= cfg.kind_drawer_turn and tilt <= cfg.kind_drawer_tilt:
+            return "drawer", turn, tilt
+        return None, turn, tilt
+
+    def push_back(self, robot: Robot, g: GraspChoice, state: PullState) -> None:
+        """Take a wrong handle back along the path it came (still held), then let go and back off:
+        the part closes again and leaves the way to the next handle free."""
+        cfg = self.config
+        site, squat = robot.site_pose()
+        path = [site] + [np.asarray(p, float) for p in reversed(state.pull_track)]
+        for a, b in zip(path[:-1], path[1:]):
+            if float(np.linalg.norm(b - a)) > 1e-4:
+                self._move(robot, a, b, squat, g.closed, cfg.pull_speed)
+        self.back_off(robot, g)
+
+    def locate(self, robot: Robot, obs: Observation, result: PlanResult, observed: tuple = ()):
+        """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle;
+        ``observed``: (box, kind) of handles whose motion showed their kind (a solver that takes them)."""
         cfg = self.config
         self._stage(result, "locate")
-        box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
+        if observed:
+            box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view, observed=observed)
+        else:
+            box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
         if cfg.refine_with_depth and snaps_to_depth(self.solver, box):
             result.events.append({"solver_box": box.to_dict()})
             box = refine_box_with_depth(box, obs.depth, obs.camera_view)
@@ -716,6 +825,8 @@ class Planner:
         last_touch = None
         direction = state.direction
         start_travel = state.travelled
+        state.pull_track = []
+        watch_kind = True
         if door:
             self._start_hinge_pull(state, start, result)
         least_x = float(start[0])
@@ -740,6 +851,16 @@ class Planner:
                 if held:
                     state.last_held = (site.copy(), quat.copy())
                     state.track.append(site.copy())
+                    state.pull_track.append(site.copy())
+                    if watch_kind and state.seen_kind is None:
+                        seen, turn, tilt = self.kind_from_track(state.pull_track)
+                        if turn is not None:
+                            watch_kind = False  # judged once per pull
+                            result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2),
+                                                  "tilt_deg": round(tilt, 2)})
+                            if seen in cfg.kind_retry_on and seen != result.target_kind and self.checks_kind():
+                                state.seen_kind, state.seen_turn = seen, turn
+                                return "wrong_kind"
             history.append(site.copy())
             if door and len(history) > cfg.direction_window:
                 motion = history[-1] - history[-1 - cfg.direction_window]
@@ -923,6 +1044,14 @@ class Planner:
 
 #: the grasp-profile depth key of each style (``grasp_depth[style]`` wins where the profile has one)
 _STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
+
+
+def _same_box(a, b) -> bool:
+    """Two image boxes (u0, v0, u1, v1) on one handle: either holds the other's centre."""
+    def holds(x, y):
+        u, v = (y[0] + y[2]) / 2, (y[1] + y[3]) / 2
+        return x[0] <= u <= x[2] and x[1] <= v <= x[3]
+    return holds(a, b) or holds(b, a)
 
 
 def _wrap(a: float) -> float:

@@ -191,14 +191,21 @@ def drawer_stack(boxes: np.ndarray, members: set[int], column_px: float = 3.0, s
 
 def choose_proposal(prob: np.ndarray, proposals: list, instruction: str, depth: np.ndarray, view,
                     plausible_fraction: float = 0.05, heat_sigma: float = 6.0,
-                    stack_drawers: bool = True) -> tuple | None:
+                    stack_drawers: bool = True, observed: tuple = ()) -> tuple | None:
     """The box of the proposal the affordance map and the instruction name (see the module doc), or
-    None without proposals. ``proposals``: [(box (u0, v0, u1, v1), mask over the box), ...]."""
+    None without proposals. ``proposals``: [(box (u0, v0, u1, v1), mask over the box), ...].
+    ``observed``: (box, kind) pairs of handles the robot moved and saw the kind of; those of the
+    other kind than the instruction's are not candidates (nor part of the named kind's layout)."""
     from scipy.ndimage import gaussian_filter
 
     from opend_mj.language import describe_instruction
-    from opend_mj.policy.learned.detector import match_instruction
+    from opend_mj.policy.learned.detector import match_instruction, observed_members
 
+    if observed and proposals:
+        named_kind = describe_instruction(instruction).kind
+        other = {i for i, k in observed_members(np.array([b for b, _ in proposals], float), observed)
+                 if k != named_kind}
+        proposals = [p for i, p in enumerate(proposals) if i not in other]
     if not proposals:
         return None
     heat = gaussian_filter(prob.astype(np.float32), heat_sigma) if heat_sigma > 0 else prob
@@ -303,7 +310,12 @@ class CLIPortSolver:
         self.heat_sigma = heat_sigma
         self.last_map: np.ndarray | None = None
 
-    def solve(self, rgb, depth, instruction, camera_view):
+    #: :meth:`solve` takes ``observed``: handles whose kind the robot saw by moving them.
+    accepts_observed = True
+
+    def solve(self, rgb, depth, instruction, camera_view, observed: tuple = ()):
+        """The named handle's box; ``observed``: ((u0, v0, u1, v1), "drawer" | "door") pairs of
+        handles the robot moved and saw the kind of (a retry after a wrong handle)."""
         from opend_mj.language import canonical_instruction
         from opend_mj.policy.handle import HandleBox
 
@@ -315,7 +327,7 @@ class CLIPortSolver:
             from opend_mj.policy.perception import handle_proposals
 
             chosen = choose_proposal(prob, handle_proposals(depth, camera_view), instruction, depth, camera_view,
-                                     self.plausible_fraction, self.heat_sigma)
+                                     self.plausible_fraction, self.heat_sigma, observed=tuple(observed))
             if chosen is not None:
                 return HandleBox(*chosen, orientation=None, score=float(prob.max()), from_depth=True)
         _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)

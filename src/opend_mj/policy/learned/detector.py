@@ -598,13 +598,41 @@ class MatchConfig:
     certain: float = 0.98
 
 
+def observed_members(boxes: np.ndarray, observed: tuple) -> list[tuple[int, str]]:
+    """(candidate index, kind) for each candidate box that an observed box (u0, v0, u1, v1) covers
+    (either holds the other's centre): the handles the robot has moved and seen the kind of."""
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    out = []
+    for box, kind in observed:
+        if len(boxes):
+            hit = _overlaps(boxes, np.asarray(box, float).reshape(1, 4))[:, 0]
+            out.extend((int(i), kind) for i in np.nonzero(hit)[0])
+    return out
+
+
+def apply_observed_kinds(boxes: np.ndarray, kind: np.ndarray, observed: tuple) -> np.ndarray:
+    """The kind probabilities (N, K) with the calls of observed handles made certain: a handle that
+    slid out is a drawer's, one that swung about a hinge a door's, whatever the image said."""
+    if not observed or kind.shape[1] < 2:
+        return kind
+    kind = kind.copy()
+    for i, k in observed_members(boxes, observed):
+        if k in KIND_LABELS:
+            kind[i] = 1e-4
+            kind[i, KIND_LABELS[k] - 1] = 1.0 - 1e-4 * (kind.shape[1] - 1)
+    return kind
+
+
 def select_handle(found: Detections, proposals: Detections | None, instruction: str, depth=None,
-                  camera_view=None, config: MatchConfig = MatchConfig()) -> tuple[np.ndarray, float] | None:
+                  camera_view=None, config: MatchConfig = MatchConfig(),
+                  observed: tuple = ()) -> tuple[np.ndarray, float] | None:
     """(box, handle probability) of the handle the instruction names, or None without candidates.
 
     Candidates: detections above ``threshold``, plus depth proposals no detection covers that the
     head calls handles; with a kinds detector, those of the instructed kind (all of them where none
-    is); Algorithm 1 (:func:`match_instruction`) picks among them."""
+    is); Algorithm 1 (:func:`match_instruction`) picks among them. ``observed``: (box, kind) pairs
+    of handles whose kind the robot saw by moving them (:func:`apply_observed_kinds`); their calls
+    are certain."""
     keep = found.handle >= config.threshold
     boxes, handle, kind = found.boxes[keep], found.handle[keep], found.kind[keep]
     if config.depth_verified and proposals is not None and len(proposals.boxes):
@@ -627,6 +655,7 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
         kind = np.concatenate([kind, proposals.kind[add]])
     if not len(boxes):
         return None
+    kind = apply_observed_kinds(boxes, kind, observed)
     named = describe_instruction(instruction)
     if config.consistent and kind.shape[1] > 1 and named.kind in KIND_LABELS:
         p = kind[:, KIND_LABELS[named.kind] - 1] * np.clip(handle, 1e-4, 1.0) ** config.handle_weight
@@ -663,7 +692,12 @@ class FasterRCNNSolver:
         self.canonical = canonical
         self.last_detections: Detections | None = None
 
-    def solve(self, rgb, depth, instruction, camera_view):
+    #: :meth:`solve` takes ``observed``: handles whose kind the robot saw by moving them.
+    accepts_observed = True
+
+    def solve(self, rgb, depth, instruction, camera_view, observed: tuple = ()):
+        """The named handle's box; ``observed``: ((u0, v0, u1, v1), "drawer" | "door") pairs of
+        handles the robot moved and saw the kind of (a retry after a wrong handle)."""
         from opend_mj.language import canonical_instruction
         from opend_mj.policy.handle import HandleBox
 
@@ -677,7 +711,7 @@ class FasterRCNNSolver:
         found, scored = detect_handles(self.model, rgb, extra, depth=depth)
         self.last_detections = found
         chosen = select_handle(found, scored if extra is not None else None, instruction, depth, camera_view,
-                               self.match)
+                               self.match, observed=tuple(observed))
         if chosen is None:
             return None
         b, score = chosen
