@@ -22,41 +22,46 @@ evaluate: install
 		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
 
 ## Every committed file under results/ from scratch (the README's tables come from these; about
-## 30 min on 2 cores): oracle, CLIPort and Faster R-CNN with all four hands on the procedural test split, the
-## Shadow hand at light x 0.7 and with reworded instructions, and the 1/120 s physics step.
+## 50 min on 2 cores): oracle, CLIPort and Faster R-CNN with all four hands on the procedural test split,
+## the oracle (Shadow) and both learned solvers (all hands) at light x 0.7 and with reworded
+## instructions, and the 1/120 s physics step.
 HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
 RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
+LEARNED_RESULTS := cliport_test cliport_test_light07 cliport_test_paraphrase2 \
+	fasterrcnn_test fasterrcnn_test_light07 fasterrcnn_test_paraphrase2
 results: install
 	rm -f results/oracle_test.jsonl results/oracle_test_dt120.jsonl results/oracle_test_light07.jsonl \
-		results/cliport_test.jsonl results/cliport_test_light07.jsonl results/cliport_test_paraphrase2.jsonl \
-		results/fasterrcnn_test.jsonl
+		$(foreach f,$(LEARNED_RESULTS),results/$(f).jsonl)
 	$(RUN) $(HANDS) --solver oracle --out results/oracle_test.jsonl
 	$(RUN) $(HANDS) --solver oracle --physics-timestep 1/120 --out results/oracle_test_dt120.jsonl
-	$(RUN) $(HANDS) --solver cliport --out results/cliport_test.jsonl
-	$(RUN) $(HANDS) --solver fasterrcnn --out results/fasterrcnn_test.jsonl
 	$(RUN) --hand shadow --solver oracle --light-scale 0.7 --out results/oracle_test_light07.jsonl
-	$(RUN) --hand shadow --solver cliport --light-scale 0.7 --out results/cliport_test_light07.jsonl
-	$(RUN) --hand shadow --solver cliport --paraphrase 2 --out results/cliport_test_paraphrase2.jsonl
-	for f in oracle_test oracle_test_dt120 cliport_test fasterrcnn_test; do \
+	for s in cliport fasterrcnn; do \
+		$(RUN) $(HANDS) --solver $$s --out results/$${s}_test.jsonl && \
+		$(RUN) $(HANDS) --solver $$s --light-scale 0.7 --out results/$${s}_test_light07.jsonl && \
+		$(RUN) $(HANDS) --solver $$s --paraphrase 2 --out results/$${s}_test_paraphrase2.jsonl || exit 1; done
+	for f in oracle_test oracle_test_dt120 $(LEARNED_RESULTS); do \
 		$(BIN)/opend score results/$$f.jsonl --plot results/$$f.png > /dev/null; done
 
 ## Real cabinets: compile your PartNet-Mobility folder (SOURCE=..., optionally IDS=a,b,c), run the
 ## oracle planner with all four hands on every target, and score it. The build's hash split is the
 ## train part (tune on it) and the test part (report it as validation). Outputs stay under build/
 ## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository.
-## SPLIT=test runs the validation part only; SOLVER=cliport or SOLVER=fasterrcnn runs a learned solver.
+## SPLIT=test runs the validation part only; SOLVER=cliport or SOLVER=fasterrcnn runs a learned solver;
+## RUN_ARGS='--light-scale 0.7' (or '--paraphrase 2', '--seed 1') with TAG=_light07 adds a condition.
 SOURCE ?= ../shared/opend-train
 SOLVER ?= oracle
 REAL_CABINETS ?= build/$(notdir $(abspath $(SOURCE)))
 REAL_OUT ?= build/real-results
 SPLIT ?= all
+RUN_ARGS ?=
+TAG ?=
 eval-real: install
 	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
 	mkdir -p $(REAL_OUT)
 	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver $(SOLVER) --split $(SPLIT) \
-		--workers $(WORKERS) --cabinets $(REAL_CABINETS) --out $(REAL_OUT)/$(SOLVER)_real.jsonl
-	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real.jsonl --csv $(REAL_OUT)/$(SOLVER)_scores.csv \
-		--plot $(REAL_OUT)/$(SOLVER)_scores.png
+		--workers $(WORKERS) --cabinets $(REAL_CABINETS) $(RUN_ARGS) --out $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl
+	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl --csv $(REAL_OUT)/$(SOLVER)_scores$(TAG).csv \
+		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

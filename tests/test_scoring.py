@@ -67,3 +67,17 @@ def test_record_without_type_counts_in_overall_only():
     row = success_table(recs)[0]
     assert row["test_overall"][1:] == (1, 2)
     assert row["test_door"][1:] == (1, 1) and row["test_drawer"][2] == 0
+
+
+def test_handles_given_up_by_their_kind_are_counted():
+    from opend_mj.evaluation.scoring import report_markdown
+
+    base = dict(hand="shadow", solver="cliport", split="test", target_type="drawer", seed=0, open_ratio=0.5,
+                success=True, cabinet="c", instruction="top drawer")
+    records = [dict(base, joint="joint_0", wrong_kind=[{"box": [0, 0, 1, 1], "kind": "door"}]),
+               dict(base, joint="joint_1", wrong_kind=[{"box": [0, 0, 1, 1], "kind": "door"}], success=False,
+                    open_ratio=0.0),
+               dict(base, joint="joint_2", wrong_kind=[])]
+    md = report_markdown(records)
+    assert "| shadow | cliport | test | 3 | 2 | 1 |" in md
+    assert "given up" not in report_markdown([records[2]])

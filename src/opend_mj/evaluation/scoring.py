@@ -155,6 +155,19 @@ def report_markdown(records: list[dict]) -> str:
             lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(wrong)} | "
                          f"{sum(_ok(r, 0.2) for r in wrong)} |")
     lines.append("")
+    if any(r.get("wrong_kind") for r in records):
+        lines.append("## Handles given up because they moved as the other kind (learned solvers)")
+        lines.append("")
+        lines.append("| hand | solver | split | episodes | with a handle given up | of which successes |")
+        lines.append("|---|---|---|---|---|---|")
+        for (hand, solver), recs in groups(records).items():
+            for split in SPLITS:
+                sel = [r for r in recs if r.get("split") == split]
+                given_up = [r for r in sel if r.get("wrong_kind")]
+                if sel and given_up:
+                    lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(given_up)} | "
+                                 f"{sum(_ok(r, 0.2) for r in given_up)} |")
+        lines.append("")
     lines.append("## Time per episode (mean)")
     lines.append("")
     lines.append("| hand | solver | episodes | sim s | wall s |")
