@@ -596,6 +596,12 @@ class MatchConfig:
     consistent: bool = True
     handle_weight: float = 0.0
     certain: float = 0.98
+    #: Prior odds door : drawer of a vertical bar (a candidate box at least ``vertical_aspect`` times
+    #: taller than wide), multiplied into the detector's kind odds. Real cabinets put vertical bars on
+    #: doors: 56 of the 59 vertical bars of the real train part's 270 targets (horizontal bars:
+    #: 38 doors, 78 drawers; no prior there). 1: no prior.
+    vertical_door_odds: float = 56.0 / 3.0
+    vertical_aspect: float = 2.5
 
 
 def observed_members(boxes: np.ndarray, observed: tuple) -> list[tuple[int, str]]:
@@ -620,6 +626,25 @@ def apply_observed_kinds(boxes: np.ndarray, kind: np.ndarray, observed: tuple) -
         if k in KIND_LABELS:
             kind[i] = 1e-4
             kind[i, KIND_LABELS[k] - 1] = 1.0 - 1e-4 * (kind.shape[1] - 1)
+    return kind
+
+
+def vertical_bar_prior(boxes: np.ndarray, kind: np.ndarray, door_odds: float, aspect: float = 2.5) -> np.ndarray:
+    """The kind probabilities (N, K; drawer, door) with the door : drawer odds of every vertical bar
+    (box height >= ``aspect`` x width) multiplied by ``door_odds``: a handle's orientation is the
+    same on real and generated images, where the detector's kind call, learnt on generated ones,
+    is not."""
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    if door_odds == 1.0 or kind.shape[1] < 2 or not len(boxes):
+        return kind
+    vertical = (boxes[:, 3] - boxes[:, 1]) >= aspect * np.maximum(boxes[:, 2] - boxes[:, 0], 1e-6)
+    if not vertical.any():
+        return kind
+    kind = kind.copy()
+    d, r = KIND_LABELS["door"] - 1, KIND_LABELS["drawer"] - 1
+    door = kind[vertical, d] * door_odds
+    total = door + kind[vertical, r]
+    kind[vertical, d], kind[vertical, r] = door / np.maximum(total, 1e-12), kind[vertical, r] / np.maximum(total, 1e-12)
     return kind
 
 
@@ -655,6 +680,7 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
         kind = np.concatenate([kind, proposals.kind[add]])
     if not len(boxes):
         return None
+    kind = vertical_bar_prior(boxes, kind, config.vertical_door_odds, config.vertical_aspect)
     kind = apply_observed_kinds(boxes, kind, observed)
     named = describe_instruction(instruction)
     if config.consistent and kind.shape[1] > 1 and named.kind in KIND_LABELS:
