@@ -256,24 +256,25 @@ class _WrongKindFirst:
 
 @pytest.mark.slow
 def test_a_handle_that_swings_when_a_drawer_was_named_is_put_back_and_the_drawer_opened(tmp_path):
-    """proc_0024 holds a drawer (joint_0) and a door (joint_1). The solver first names the door's
-    handle for "drawer": the pull sees the handle swing, takes it back, lets go, asks the solver
-    again with what it saw, and opens the drawer. The door ends where it started (not opened)."""
+    """proc_0067 holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names
+    the right door's handle for "drawer": the Skeleton hand's pull sees the handle swing, takes it
+    back, lets go, asks the solver again with what it saw, and opens the drawer. The door ends where
+    it started (not opened)."""
     from opend_mj.assets.compiler import compile_cabinet
     from opend_mj.assets.procedural import generate_source
     from opend_mj.evaluation.episode import EpisodeJob
     from opend_mj.evaluation.runner import run_episode
     from opend_mj.policy.solvers import register_solver
 
-    src = generate_source(24, 0, tmp_path / "src")
+    src = generate_source(67, 0, tmp_path / "src")
     compile_cabinet(src, tmp_path / "built", cache_dir=tmp_path / "cache")
-    cab = tmp_path / "built" / "proc_0024"
+    cab = tmp_path / "built" / "proc_0067"
 
     def job(joint, solver):
-        return EpisodeJob(cabinet="proc_0024", cabinet_dir=str(cab), joint=joint, split="train", hand="shadow",
+        return EpisodeJob(cabinet="proc_0067", cabinet_dir=str(cab), joint=joint, split="train", hand="skeleton",
                           solver=solver, use_grasp_file=False)
 
-    door = run_episode(job("joint_1", "oracle"))  # the door's handle box, in the same scene
+    door = run_episode(job("joint_2", "oracle"))  # the door's handle box, in the same scene
     assert door["target_type"] == "door" and door["success"], door
     drawer = run_episode(job("joint_0", "oracle"))
     assert drawer["target_type"] == "drawer" and drawer["success"], drawer

@@ -598,7 +598,7 @@ class MatchConfig:
     certain: float = 0.98
     #: Prior odds door : drawer of a vertical bar (a candidate box at least ``vertical_aspect`` times
     #: taller than wide), multiplied into the detector's kind odds. Real cabinets put vertical bars on
-    #: doors: 56 of the 59 vertical bars of the real train part's 270 targets (horizontal bars:
+    #: doors: 56 of the 59 vertical bars of the real train part's 191 targets (horizontal bars:
     #: 38 doors, 78 drawers; no prior there). 1: no prior.
     vertical_door_odds: float = 56.0 / 3.0
     vertical_aspect: float = 2.5
