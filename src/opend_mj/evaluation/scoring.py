@@ -92,6 +92,21 @@ def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
     return rows
 
 
+def _episodes_with(records: list[dict], field: str, title: str, column: str, only_with: bool = False) -> list[str]:
+    """A table section: per (hand, solver, split), the episodes whose record has ``field`` set, and
+    how many of them succeeded (``only_with``: rows with at least one such episode only)."""
+    lines = [f"## {title}", "", f"| hand | solver | split | episodes | {column} | of which successes |",
+             "|---|---|---|---|---|---|"]
+    for (hand, solver), recs in groups(records).items():
+        for split in SPLITS:
+            sel = [r for r in recs if r.get("split") == split]
+            marked = [r for r in sel if r.get(field)]
+            if sel and (marked or not only_with):
+                lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(marked)} | "
+                             f"{sum(_ok(r, 0.2) for r in marked)} |")
+    return lines + [""]
+
+
 def report_markdown(records: list[dict]) -> str:
     lines = [f"# Results ({len(records)} episodes)", ""]
     lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
@@ -142,32 +157,10 @@ def report_markdown(records: list[dict]) -> str:
             lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {sum(n_re) / len(sel):.2f} | {len(again)} | "
                          f"{sum(_ok(r, 0.2) for r in again)} | {len(pushed)} ({sum(_ok(r, 0.2) for r in pushed)}) |")
     lines.append("")
-    lines.append("## Wrong targets opened")
-    lines.append("")
-    lines.append("| hand | solver | split | episodes | with another target moved | of which successes |")
-    lines.append("|---|---|---|---|---|---|")
-    for (hand, solver), recs in groups(records).items():
-        for split in SPLITS:
-            sel = [r for r in recs if r.get("split") == split]
-            if not sel:
-                continue
-            wrong = [r for r in sel if r.get("others_moved")]
-            lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(wrong)} | "
-                         f"{sum(_ok(r, 0.2) for r in wrong)} |")
-    lines.append("")
+    lines += _episodes_with(records, "others_moved", "Wrong targets opened", "with another target moved")
     if any(r.get("wrong_kind") for r in records):
-        lines.append("## Handles given up because they moved as the other kind (learned solvers)")
-        lines.append("")
-        lines.append("| hand | solver | split | episodes | with a handle given up | of which successes |")
-        lines.append("|---|---|---|---|---|---|")
-        for (hand, solver), recs in groups(records).items():
-            for split in SPLITS:
-                sel = [r for r in recs if r.get("split") == split]
-                given_up = [r for r in sel if r.get("wrong_kind")]
-                if sel and given_up:
-                    lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {len(given_up)} | "
-                                 f"{sum(_ok(r, 0.2) for r in given_up)} |")
-        lines.append("")
+        lines += _episodes_with(records, "wrong_kind", "Handles given up because they moved as the other kind "
+                                "(learned solvers)", "with a handle given up", only_with=True)
     lines.append("## Time per episode (mean)")
     lines.append("")
     lines.append("| hand | solver | episodes | sim s | wall s |")

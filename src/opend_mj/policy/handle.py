@@ -45,6 +45,21 @@ class HandleBox:
         return {"box": [round(x, 2) for x in self.as_tuple()], "orientation": self.orientation}
 
 
+def centres_overlap(a, b) -> np.ndarray:
+    """(len(a), len(b)) True where a box (u0, v0, u1, v1) of ``a`` holds the centre of a box of ``b``
+    or the reverse: the two boxes are on one handle."""
+    a = np.asarray(a, float).reshape(-1, 4)
+    b = np.asarray(b, float).reshape(-1, 4)
+    ca = np.stack([(a[:, 0] + a[:, 2]) / 2, (a[:, 1] + a[:, 3]) / 2], 1)
+    cb = np.stack([(b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2], 1)
+
+    def inside(boxes, pts):
+        return ((pts[None, :, 0] >= boxes[:, None, 0]) & (pts[None, :, 0] <= boxes[:, None, 2])
+                & (pts[None, :, 1] >= boxes[:, None, 1]) & (pts[None, :, 1] <= boxes[:, None, 3]))
+
+    return inside(a, cb) | inside(b, ca).T
+
+
 class HandleSolver(Protocol):
     """What the planner needs from a handle solver.
 

@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.language import hinge_side, target_kind
-from opend_mj.policy.handle import HandleSolver
+from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     door_edges,
     estimate_handle,
@@ -401,8 +401,8 @@ class PullState:
     angle0: float = 0.0
     sense: float = 0.0
     opened: float = 0.0  # the largest door angle (deg) reached while the grip held
-    #: the site's path while held in the latest pull, and the kind (and turn, deg) it showed
-    pull_track: list = field(default_factory=list)
+    #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
+    pull_start: int = 0
     seen_kind: str | None = None
     seen_turn: float = 0.0
 
@@ -487,7 +487,7 @@ class Planner:
                 status = "not_held"
                 break
             new_handle, new_box = self.locate(robot, obs, result, observed)
-            if new_handle is None or any(_same_box(new_box.as_tuple(), b) for b, _ in observed):
+            if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
                 status = "not_held"
                 break
             handle, box = new_handle, new_box
@@ -590,7 +590,7 @@ class Planner:
         the part closes again and leaves the way to the next handle free."""
         cfg = self.config
         site, squat = robot.site_pose()
-        path = [site] + [np.asarray(p, float) for p in reversed(state.pull_track)]
+        path = [site] + [np.asarray(p, float) for p in reversed(state.track[state.pull_start:])]
         for a, b in zip(path[:-1], path[1:]):
             if float(np.linalg.norm(b - a)) > 1e-4:
                 self._move(robot, a, b, squat, g.closed, cfg.pull_speed)
@@ -830,7 +830,8 @@ class Planner:
         last_touch = None
         direction = state.direction
         start_travel = state.travelled
-        state.pull_track = []
+        state.pull_start = len(state.track)
+        held_path = 0.0  # the held path's length (m): the kind is judged once it is long enough
         watch_kind = True
         if door:
             self._start_hinge_pull(state, start, result)
@@ -855,10 +856,11 @@ class Planner:
                     return "slipped"
                 if held:
                     state.last_held = (site.copy(), quat.copy())
+                    if len(state.track) > state.pull_start:
+                        held_path += float(np.linalg.norm(site - state.track[-1]))
                     state.track.append(site.copy())
-                    state.pull_track.append(site.copy())
-                    if watch_kind and state.seen_kind is None:
-                        seen, turn, tilt = self.kind_from_track(state.pull_track)
+                    if watch_kind and held_path >= cfg.kind_check_distance - 1e-9:
+                        seen, turn, tilt = self.kind_from_track(state.track[state.pull_start:])
                         if turn is not None:
                             watch_kind = False  # judged once per pull
                             result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2),
@@ -1049,14 +1051,6 @@ class Planner:
 
 #: the grasp-profile depth key of each style (``grasp_depth[style]`` wins where the profile has one)
 _STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
-
-
-def _same_box(a, b) -> bool:
-    """Two image boxes (u0, v0, u1, v1) on one handle: either holds the other's centre."""
-    def holds(x, y):
-        u, v = (y[0] + y[2]) / 2, (y[1] + y[3]) / 2
-        return x[0] <= u <= x[2] and x[1] <= v <= x[3]
-    return holds(a, b) or holds(b, a)
 
 
 def _wrap(a: float) -> float:

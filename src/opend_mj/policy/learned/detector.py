@@ -47,6 +47,7 @@ from opend_mj.language import (
     describe_instruction,
     levels,
 )
+from opend_mj.policy.handle import centres_overlap
 
 BACKBONES = ("resnet50_fpn", "mobilenet_v3_large_fpn", "mobilenet_v3_large_320_fpn", "compact_fpn")
 DEFAULT_CHECKPOINT = Path("checkpoints/fasterrcnn.pt")
@@ -557,18 +558,6 @@ def detect_handles(model, rgb: np.ndarray, extra_boxes=None, nms_iou: float = 0.
     return found, scored
 
 
-def _overlaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(len(a), len(b)) True where a box of ``a`` holds the centre of a box of ``b`` or the reverse."""
-    ca = np.stack([(a[:, 0] + a[:, 2]) / 2, (a[:, 1] + a[:, 3]) / 2], 1)
-    cb = np.stack([(b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2], 1)
-
-    def inside(boxes, pts):
-        return ((pts[None, :, 0] >= boxes[:, None, 0]) & (pts[None, :, 0] <= boxes[:, None, 2])
-                & (pts[None, :, 1] >= boxes[:, None, 1]) & (pts[None, :, 1] <= boxes[:, None, 3]))
-
-    return inside(a, cb) | inside(b, ca).T
-
-
 @dataclass(frozen=True)
 class MatchConfig:
     """How the solver turns detections (and depth proposals) into the named handle."""
@@ -611,7 +600,7 @@ def observed_members(boxes: np.ndarray, observed: tuple) -> list[tuple[int, str]
     out = []
     for box, kind in observed:
         if len(boxes):
-            hit = _overlaps(boxes, np.asarray(box, float).reshape(1, 4))[:, 0]
+            hit = centres_overlap(boxes, np.asarray(box, float).reshape(1, 4))[:, 0]
             out.extend((int(i), kind) for i in np.nonzero(hit)[0])
     return out
 
@@ -664,7 +653,7 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
         covering, covering_handle, covering_kind = boxes, handle, kind
         handle, kind = proposals.handle.copy(), proposals.kind.copy()
         if len(covering):
-            cover = _overlaps(proposals.boxes, covering)
+            cover = centres_overlap(proposals.boxes, covering)
             for i in np.nonzero(cover.any(1))[0]:
                 j = np.nonzero(cover[i])[0]
                 j = j[np.argmax(covering_handle[j])]
@@ -674,7 +663,7 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
     elif config.use_proposals and proposals is not None and len(proposals.boxes):
         add = proposals.handle >= config.proposal_threshold
         if len(boxes):
-            add &= ~_overlaps(proposals.boxes, boxes).any(1)
+            add &= ~centres_overlap(proposals.boxes, boxes).any(1)
         boxes = np.concatenate([boxes, proposals.boxes[add]])
         handle = np.concatenate([handle, proposals.handle[add]])
         kind = np.concatenate([kind, proposals.kind[add]])
