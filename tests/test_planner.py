@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -236,9 +237,60 @@ def test_kind_from_the_held_path():
     assert planner.kind_from_track(list(flap))[0] == "door"
 
 
+def _front_depth(view, hinge, axis: str, angle_deg: float, shift: float = 0.0) -> np.ndarray:
+    """Depth image of a front 0.6 m wide and 0.5 m tall at x = 1 (camera at the origin looking
+    along +x), slid ``shift`` m toward the camera, or turned ``angle_deg`` about a hinge line through
+    ``hinge`` along z ("side") or y ("flap"); a wall 2 m behind it."""
+    h, w = view.height, view.width
+    vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    d = view.backproject(uu, vv, np.ones((h, w)))  # ray points at planar depth 1 (x = 1)
+    t = math.radians(angle_deg)
+    hinge = np.asarray(hinge, float)
+    n = np.array([math.cos(t), math.sin(t), 0.0]) if axis == "side" else np.array([math.cos(t), 0.0, math.sin(t)])
+    plane = hinge - np.array([shift, 0.0, 0.0])
+    depth = (plane @ n) / (d @ n)
+    p = d * depth[..., None]
+    if angle_deg:
+        along = np.array([-math.sin(t), math.cos(t), 0.0]) if axis == "side" else np.array([-math.sin(t), 0.0, math.cos(t)])
+        r = (p - hinge) @ along
+        if axis == "side":
+            on = (r >= 0) & (r <= 0.6) & (np.abs(p[..., 2]) <= 0.25)
+        else:
+            on = (r >= 0) & (r <= 0.5) & (np.abs(p[..., 1]) <= 0.3)
+    else:
+        on = (np.abs(p[..., 1]) <= 0.3) & (np.abs(p[..., 2]) <= 0.25)
+    return np.where(on, depth, 3.0)
+
+
+def test_kind_from_the_front_seen_moving():
+    """A drawer's front slides out level; a door's turns about its side; a flap's about its bottom
+    edge: the camera tells them apart whatever the hand's path did."""
+    from opend_mj.policy.perception import front_motion
+    from opend_mj.policy.planner import Planner, PlannerConfig
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
+    handle = np.array([0.97, 0.25, 0.0])  # near the free edge, 3 cm proud
+    cases = {"drawer": _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.12),
+             "door": _front_depth(view, (1.0, -0.3, 0.0), "side", 14.0),
+             "flap": _front_depth(view, (1.0, 0.0, -0.25), "flap", 20.0)}
+    seen = {}
+    for name, depth in cases.items():
+        site = handle - np.array([0.12, 0.0, 0.0])
+        front = front_motion(closed, depth, view, handle, 1.0, site)
+        assert front is not None, name
+        seen[name] = planner.kind_from_front(front)
+    assert seen == {"drawer": "drawer", "door": "door", "flap": "door"}, seen
+    assert front_motion(closed, closed, view, handle, 1.0, handle) is None  # nothing moved: unclear
+    assert planner.kind_from_front(None) is None
+
+
 class _WrongKindFirst:
-    """A learned-like solver whose first answer is the door's handle for a drawer instruction, and
-    the named drawer's handle once told that the first one swung like a door."""
+    """A learned-like solver whose first answer is the other kind's handle (``boxes["first"]``), and
+    the named handle (``boxes["named"]``) once told what the first one showed."""
 
     name = "wrong_kind_first"
     needs_ground_truth = False
@@ -250,16 +302,17 @@ class _WrongKindFirst:
         from opend_mj.policy.handle import HandleBox
 
         type(self).calls.append(tuple(observed))
-        box = self.boxes["door"] if not observed else self.boxes["drawer"]
+        box = self.boxes["first"] if not observed else self.boxes["named"]
         return HandleBox(*box)
 
 
 @pytest.mark.slow
-def test_a_handle_that_swings_when_a_drawer_was_named_is_put_back_and_the_drawer_opened(tmp_path):
+def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_opened(tmp_path):
     """proc_0067 holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names
     the right door's handle for "drawer": the Skeleton hand's pull sees the handle swing, takes it
     back, lets go, asks the solver again with what it saw, and opens the drawer. The door ends where
-    it started (not opened)."""
+    it started (not opened). Then the reverse: the drawer's handle for "right door", seen sliding
+    out by the camera."""
     from opend_mj.assets.compiler import compile_cabinet
     from opend_mj.assets.procedural import generate_source
     from opend_mj.evaluation.episode import EpisodeJob
@@ -278,12 +331,23 @@ def test_a_handle_that_swings_when_a_drawer_was_named_is_put_back_and_the_drawer
     assert door["target_type"] == "door" and door["success"], door
     drawer = run_episode(job("joint_0", "oracle"))
     assert drawer["target_type"] == "drawer" and drawer["success"], drawer
-    _WrongKindFirst.boxes = {"door": door["gt_box"], "drawer": drawer["gt_box"]}
+    _WrongKindFirst.boxes = {"first": door["gt_box"], "named": drawer["gt_box"]}
     _WrongKindFirst.calls = []
     register_solver("wrong_kind_first", _WrongKindFirst, overwrite=True)
     rec = run_episode(job("joint_0", "wrong_kind_first"))
     assert "error" not in rec, rec.get("error")
     assert [w["kind"] for w in rec["wrong_kind"]] == ["door"], rec["wrong_kind"]
     assert len(_WrongKindFirst.calls) == 2 and _WrongKindFirst.calls[1][0][1] == "door"
+    assert rec["success"] and rec["open_ratio"] > 0.2, rec
+    assert rec["others_moved"] == [], rec["others_moved"]
+
+    # and the other way round: "right door" named, the drawer's handle given first. Pulled as a door,
+    # its path is no help (the hand is steered on a circle); the camera sees the front slide out level
+    _WrongKindFirst.boxes = {"first": drawer["gt_box"], "named": door["gt_box"]}
+    _WrongKindFirst.calls = []
+    rec = run_episode(job("joint_2", "wrong_kind_first"))
+    assert "error" not in rec, rec.get("error")
+    assert [w["kind"] for w in rec["wrong_kind"]] == ["drawer"], (rec["wrong_kind"], rec["front_seen"])
+    assert len(_WrongKindFirst.calls) == 2 and _WrongKindFirst.calls[1][0][1] == "drawer"
     assert rec["success"] and rec["open_ratio"] > 0.2, rec
     assert rec["others_moved"] == [], rec["others_moved"]

@@ -213,7 +213,14 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         if video:
             video.capture()
 
-    robot = Robot(_StopAtLast(env), on_step=on_step)
+    looks: list = []
+
+    def look():  # the same camera again, mid-episode (the planner watches a front move)
+        if not looks:
+            looks.append(RGBDCamera(physics, "front", config.image_size, config.image_size))
+        return looks[0].render()[1]
+
+    robot = Robot(_StopAtLast(env), on_step=on_step, look=look)
     overrides = dict(job.planner_overrides)
     pconfig = replace(PlannerConfig(pull=job.pull))
     grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
@@ -233,6 +240,8 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
     finally:
         if video:
             video.close()
+        for cam in looks:
+            cam.close()
     outcome = task.outcome(physics)
 
     # failure stage (ground truth, for the tables)
@@ -262,6 +271,7 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         "pushed": bool(plan.pushed),
         "wrong_kind": list(plan.wrong_kind),
         "kind_seen": [[e["kind_seen"], e["turn_deg"], e["tilt_deg"]] for e in plan.events if "kind_seen" in e],
+        "front_seen": [e["front_seen"] for e in plan.events if "front_seen" in e],
         "verify": [e["verify"] for e in plan.events if "verify" in e],
         "turned_deg": round(plan.turned_deg, 2),
         "sim_seconds": round(float(physics.data.time), 3),

@@ -104,6 +104,11 @@ class _ObservedRobot:
         self.n_steps = 0
         self._inbox, self._outbox = inbox, outbox
 
+    def look(self):
+        """A depth image of this step where the observation carries one (``images = "every_step"``), else None."""
+        depth = self.obs.get("depth")
+        return None if depth is None else np.asarray(depth)
+
     @property
     def time(self) -> float:
         return float(self.obs["time"][0])

@@ -413,3 +413,56 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
             if handle_like(sub_labels, j, sub_sl, sub_mask, sub_x) and on_front(sub_x):
                 out.append(((sub_sl[1].start, sub_sl[0].start, sub_sl[1].stop, sub_sl[0].stop), sub_mask))
     return out
+
+
+# --------------------------------------------------------------------------------------------------
+# How a front moved: a drawer's slides out level, a door's turns about its hinge
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FrontMotionConfig:
+    """What :func:`front_motion` reads of two depth images of one front, before and during a pull.
+
+    Pixels that showed the front's plane (within ``on_plane`` m of the panel behind the handle,
+    within ``reach`` m of the handle across and up/down) and are now at least ``min_shift`` m
+    nearer, away from the hand (``hand_clear`` m around the grasp site), say how the front moved:
+    a drawer's front slides out level (the shift is the same across it), a door's turns (the shift
+    grows along it, the slope is the tangent of the door's angle)."""
+
+    on_plane: float = 0.015
+    reach: tuple = (0.4, 0.3)
+    min_shift: float = 0.02
+    max_shift: float = 0.6
+    hand_clear: float = 0.12
+    min_pixels: int = 40
+
+
+def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: float, site,
+                 config: FrontMotionConfig = FrontMotionConfig()) -> dict | None:
+    """How the front around a handle moved between two depth images from one camera, as a plane
+    fitted to the shift toward the camera of each pixel that moved: ``across`` and ``up`` (m per m
+    along y and z: 0 and 0 for a drawer, the tangent of a side-hinged door's angle across, of a
+    flap's up), ``shift`` (m, at the handle), ``spread`` (m, across the front moved) and ``pixels``;
+    None where too little of it is seen moving."""
+    pts0 = view.point_cloud(np.where(np.isfinite(depth0), depth0, 1e3))
+    pts1 = view.point_cloud(np.where(np.isfinite(depth1), depth1, 1e3))
+    centre = np.asarray(centre, float)
+    sel = ((np.abs(pts0[..., 0] - panel_x) < config.on_plane)
+           & (np.abs(pts0[..., 1] - centre[1]) < config.reach[0])
+           & (np.abs(pts0[..., 2] - centre[2]) < config.reach[1]))
+    shift = pts0[..., 0] - pts1[..., 0]
+    clear = np.linalg.norm(pts1 - np.asarray(site, float), axis=-1) > config.hand_clear
+    moved = sel & clear & (shift > config.min_shift) & (shift < config.max_shift)
+    if int(moved.sum()) < config.min_pixels:
+        return None
+    y, z, d = pts0[..., 1][moved] - centre[1], pts0[..., 2][moved] - centre[2], shift[moved]
+    a = np.stack([np.ones(len(y)), y, z], 1)
+    keep = np.ones(len(y), bool)
+    for _ in range(3):  # least squares, dropping what the plane leaves far (the hand's shadow, an edge)
+        coef, *_ = np.linalg.lstsq(a[keep], d[keep], rcond=None)
+        resid = np.abs(d - a @ coef)
+        new = resid < max(0.01, 2.5 * float(np.median(resid[keep])))
+        if new.sum() < config.min_pixels or (new == keep).all():
+            break
+        keep = new
+    return {"across": float(coef[1]), "up": float(coef[2]), "shift": float(coef[0]),
+            "spread": float(np.ptp(y[keep])), "pixels": int(keep.sum())}

@@ -35,6 +35,7 @@ from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     door_edges,
     estimate_handle,
+    front_motion,
     infer_hinge_side,
     measure_handle,
     one_of_paired_handles,
@@ -234,6 +235,16 @@ class PlannerConfig:
     #: per hand moved straight within 1 degree for 12 cm (a hand sliding along its bar), so
     #: "drawer" is only logged.
     kind_retry_on: tuple = ("door",)
+    #: The front seen moving (a robot that can look again: :func:`perception.front_motion` between
+    #: the first image and one taken at the check): a front whose shift grows across it by at least
+    #: ``front_door_slope`` (m per m, the tangent of the door's angle) turned about a hinge; one
+    #: within ``front_drawer_slope`` of level that came ``front_drawer_shift`` (m) or more toward the
+    #: camera slid out (the larger of the slopes across and up: a flap turns about a level hinge).
+    #: ``front_retry_on``: the kinds whose sighting by the front gives a handle up.
+    front_door_slope: float = 0.15
+    front_drawer_slope: float = 0.05
+    front_drawer_shift: float = 0.05
+    front_retry_on: tuple = ("drawer", "door")
     #: (3: on the real train part CLIPort gave up both bars of a double door for a lone "drawer" in
     #: 6 episodes, 11.3-11.8 s into the 24 s budget, and had no try left for the drawer)
     max_target_tries: int = 3
@@ -290,8 +301,12 @@ class Observation:
 class Robot:
     """The planner's handle on an environment: the task action and the hand's own state only."""
 
-    def __init__(self, env, on_step: Callable[[], None] | None = None):
+    def __init__(self, env, on_step: Callable[[], None] | None = None,
+                 look: Callable[[], np.ndarray] | None = None):
         self.env = env
+        #: a new depth image from the episode's camera (the one that took the first observation),
+        #: or None where the robot cannot look again
+        self.look = look
         self.physics = env.physics
         self.task = env.task
         self.spec: HandSpec = env.task.hand.spec
@@ -467,6 +482,7 @@ class Planner:
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         result.target_kind = target_kind(obs.instruction)
+        self._first = obs
         observed: tuple = ()
         handle, box = self.locate(robot, obs, result)
         if handle is None:
@@ -518,6 +534,7 @@ class Planner:
         pull state, last grasp); status "done", "slipped", "not_held" or "wrong_kind" (its motion
         showed the other kind than the instruction's)."""
         cfg = self.config
+        self._pulled_handle = handle
         shape = self.perceive(handle, box, obs, result)
         grasp = self.choose_grasp(handle, shape, obs, result)
         door = result.target_kind == "door" and cfg.pull == "arc"
@@ -584,6 +601,32 @@ class Planner:
         if turn <= cfg.kind_drawer_turn and tilt <= cfg.kind_drawer_tilt:
             return "drawer", turn, tilt
         return None, turn, tilt
+
+    def kind_from_front(self, front: dict | None) -> str | None:
+        """"door" for a front that turned, "drawer" for one that slid out level, None where unclear
+        (or not seen)."""
+        cfg = self.config
+        if front is None:
+            return None
+        turn = max(abs(front["across"]), abs(front["up"]))
+        if turn >= cfg.front_door_slope:
+            return "door"
+        if turn <= cfg.front_drawer_slope and front["shift"] >= cfg.front_drawer_shift:
+            return "drawer"
+        return None
+
+    def front_seen(self, robot, site) -> dict | None:
+        """How the pulled handle's front moved since the first image (:func:`front_motion`), where
+        the robot can look again."""
+        look = getattr(robot, "look", None)
+        handle, first = getattr(self, "_pulled_handle", None), getattr(self, "_first", None)
+        if look is None or handle is None or first is None or first.depth is None:
+            return None
+        depth = look()
+        if depth is None:
+            return None
+        seen = front_motion(first.depth, depth, first.camera_view, handle.centre, handle.panel_x, site)
+        return None if seen is None else {k: round(v, 4) if isinstance(v, float) else v for k, v in seen.items()}
 
     def push_back(self, robot: Robot, g: GraspChoice, state: PullState) -> None:
         """Take a wrong handle back along the path it came (still held), then let go and back off:
@@ -865,8 +908,19 @@ class Planner:
                             watch_kind = False  # judged once per pull
                             result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2),
                                                   "tilt_deg": round(tilt, 2)})
-                            if seen in cfg.kind_retry_on and seen != result.target_kind and self.checks_kind():
-                                state.seen_kind, state.seen_turn = seen, turn
+                            front = self.front_seen(robot, site)
+                            front_kind = self.kind_from_front(front)
+                            if front is not None:
+                                result.events.append({"front_seen": front, "front_kind": front_kind})
+                            wrong = None
+                            if front_kind in cfg.front_retry_on and front_kind != result.target_kind \
+                                    and seen in (None, front_kind):
+                                wrong = front_kind
+                            elif seen in cfg.kind_retry_on and seen != result.target_kind \
+                                    and front_kind in (None, seen):
+                                wrong = seen
+                            if wrong is not None and self.checks_kind():
+                                state.seen_kind, state.seen_turn = wrong, turn
                                 return "wrong_kind"
             history.append(site.copy())
             if door and len(history) > cfg.direction_window:
