@@ -433,7 +433,8 @@ class FrontMotionConfig:
     min_shift: float = 0.02
     max_shift: float = 0.6
     hand_clear: float = 0.12
-    min_pixels: int = 40
+    #: fewer moved pixels than this say nothing (a sliver of a front fits any slope)
+    min_pixels: int = 200
 
 
 def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: float, site,
