@@ -422,14 +422,16 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
 class FrontMotionConfig:
     """What :func:`front_motion` reads of two depth images of one front, before and during a pull.
 
-    Pixels that showed the front's plane (within ``on_plane`` m of the panel behind the handle,
-    within ``reach`` m of the handle across and up/down) and are now at least ``min_shift`` m
+    Pixels that showed the front's plane (within ``on_plane`` m of the most common depth within
+    ``front_depth`` of the panel behind the handle and ``reach`` m of the handle across and up/down) and are now at least ``min_shift`` m
     nearer, away from the hand (``hand_clear`` m around the grasp site), say how the front moved:
     a drawer's front slides out level (the shift is the same across it), a door's turns (the shift
     grows along it, the slope is the tangent of the door's angle)."""
 
     on_plane: float = 0.015
     reach: tuple = (0.4, 0.3)
+    #: the front is looked for within this (m) of the panel behind the handle
+    front_depth: float = 0.1
     min_shift: float = 0.02
     max_shift: float = 0.6
     hand_clear: float = 0.12
@@ -447,9 +449,17 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     pts0 = view.point_cloud(np.where(np.isfinite(depth0), depth0, 1e3))
     pts1 = view.point_cloud(np.where(np.isfinite(depth1), depth1, 1e3))
     centre = np.asarray(centre, float)
-    sel = ((np.abs(pts0[..., 0] - panel_x) < config.on_plane)
-           & (np.abs(pts0[..., 1] - centre[1]) < config.reach[0])
-           & (np.abs(pts0[..., 2] - centre[2]) < config.reach[1]))
+    around = ((np.abs(pts0[..., 1] - centre[1]) < config.reach[0]) & (np.abs(pts0[..., 2] - centre[2]) < config.reach[1])
+              & (np.abs(pts0[..., 0] - panel_x) < config.front_depth))
+    if not around.any():
+        return None
+    # the front: the most common depth around the handle (a panel estimated from the handle's own
+    # ring can sit on a lip or a frame beside the front)
+    xs = pts0[..., 0][around]
+    hist, edges = np.histogram(xs, bins=np.arange(xs.min(), xs.max() + 2 * config.on_plane, config.on_plane))
+    front_x = float(np.median(xs[(xs >= edges[np.argmax(hist)] - config.on_plane)
+                                 & (xs < edges[np.argmax(hist) + 1] + config.on_plane)]))
+    sel = around & (np.abs(pts0[..., 0] - front_x) < config.on_plane)
     shift = pts0[..., 0] - pts1[..., 0]
     clear = np.linalg.norm(pts1 - np.asarray(site, float), axis=-1) > config.hand_clear
     moved = sel & clear & (shift > config.min_shift) & (shift < config.max_shift)

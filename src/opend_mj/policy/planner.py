@@ -637,7 +637,8 @@ class Planner:
 
     def push_back(self, robot: Robot, g: GraspChoice, state: PullState) -> None:
         """Take a wrong handle back along the path it came (still held), then let go and back off:
-        the part closes again and leaves the way to the next handle free."""
+        the part closes again (a drawer pulled as a door may stay a little out: the hand slid
+        along its bar) and leaves the way to the next handle free."""
         cfg = self.config
         site, squat = robot.site_pose()
         path = [site] + [np.asarray(p, float) for p in reversed(state.track[state.pull_start:])]
