@@ -444,8 +444,9 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     """How the front around a handle moved between two depth images from one camera, as a plane
     fitted to the shift toward the camera of each pixel that moved: ``across`` and ``up`` (m per m
     along y and z: 0 and 0 for a drawer, the tangent of a side-hinged door's angle across, of a
-    flap's up), ``shift`` (m, at the handle), ``spread`` (m, across the front moved) and ``pixels``;
-    None where too little of it is seen moving."""
+    flap's up), ``shift`` (m, at the handle), ``spread`` (m, across the front moved), ``pixels``,
+    and ``across_left`` / ``across_right``, the slope across of each side of the handle on its own
+    (None where too little is seen there); None where too little of it is seen moving."""
     pts0 = view.point_cloud(np.where(np.isfinite(depth0), depth0, 1e3))
     pts1 = view.point_cloud(np.where(np.isfinite(depth1), depth1, 1e3))
     centre = np.asarray(centre, float)
@@ -466,14 +467,33 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     if int(moved.sum()) < config.min_pixels:
         return None
     y, z, d = pts0[..., 1][moved] - centre[1], pts0[..., 2][moved] - centre[2], shift[moved]
+    whole = _fit_shift_plane(y, z, d, config.min_pixels)
+    if whole is None:
+        return None
+    coef, keep = whole
+    out = {"across": float(coef[1]), "up": float(coef[2]), "shift": float(coef[0]),
+           "spread": float(np.ptp(y[keep])), "pixels": int(keep.sum())}
+    # each side of the handle on its own: a double door's two leaves move apart, and one plane
+    # over both reads level where each of them turned
+    for name, side in (("across_left", y > 0), ("across_right", y < 0)):
+        part = _fit_shift_plane(y[side], z[side], d[side], config.min_pixels)
+        out[name] = float(part[0][1]) if part is not None else None
+    return out
+
+
+def _fit_shift_plane(y: np.ndarray, z: np.ndarray, d: np.ndarray, min_pixels: int):
+    """(coefficients (shift, across, up), inliers) of ``d = shift + across * y + up * z``, least
+    squares dropping what the plane leaves far (the hand's shadow, an edge); None below
+    ``min_pixels``."""
+    if len(d) < min_pixels:
+        return None
     a = np.stack([np.ones(len(y)), y, z], 1)
     keep = np.ones(len(y), bool)
-    for _ in range(3):  # least squares, dropping what the plane leaves far (the hand's shadow, an edge)
+    for _ in range(3):
         coef, *_ = np.linalg.lstsq(a[keep], d[keep], rcond=None)
         resid = np.abs(d - a @ coef)
         new = resid < max(0.01, 2.5 * float(np.median(resid[keep])))
-        if new.sum() < config.min_pixels or (new == keep).all():
+        if new.sum() < min_pixels or (new == keep).all():
             break
         keep = new
-    return {"across": float(coef[1]), "up": float(coef[2]), "shift": float(coef[0]),
-            "spread": float(np.ptp(y[keep])), "pixels": int(keep.sum())}
+    return coef, keep
