@@ -437,6 +437,7 @@ class FrontMotionConfig:
     hand_clear: float = 0.12
     #: fewer moved pixels than this say nothing (a sliver of a front fits any slope)
     min_pixels: int = 200
+    min_extent: float = 0.1
 
 
 def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: float, site,
@@ -444,9 +445,9 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     """How the front around a handle moved between two depth images from one camera, as a plane
     fitted to the shift toward the camera of each pixel that moved: ``across`` and ``up`` (m per m
     along y and z: 0 and 0 for a drawer, the tangent of a side-hinged door's angle across, of a
-    flap's up), ``shift`` (m, at the handle), ``spread`` (m, across the front moved), ``pixels``,
-    and ``across_left`` / ``across_right``, the slope across of each side of the handle on its own
-    (None where too little is seen there); None where too little of it is seen moving."""
+    flap's up), ``shift`` (m, at the handle), ``spread`` (m, across the front moved), ``pixels``
+    and ``parts`` (connected groups of moved pixels: the one that moved most is read where it spans
+    ``min_extent`` or more); None where too little of it is seen moving."""
     pts0 = view.point_cloud(np.where(np.isfinite(depth0), depth0, 1e3))
     pts1 = view.point_cloud(np.where(np.isfinite(depth1), depth1, 1e3))
     centre = np.asarray(centre, float)
@@ -466,19 +467,25 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     moved = sel & clear & (shift > config.min_shift) & (shift < config.max_shift)
     if int(moved.sum()) < config.min_pixels:
         return None
+    # the part that moved most: a double door's two leaves move apart, one plane over both reads
+    # level where each of them turned; the seam between them splits the moved pixels
+    from scipy import ndimage
+
+    labels, n = ndimage.label(moved)
+    if n > 1:
+        sizes = ndimage.sum(np.ones_like(shift), labels, index=np.arange(1, n + 1))
+        pushed = ndimage.sum(np.where(moved, shift, 0.0), labels, index=np.arange(1, n + 1))
+        best = int(np.argmax(np.where(sizes >= config.min_pixels, pushed, -1.0))) + 1
+        part = labels == best
+        if part.sum() >= config.min_pixels and np.ptp(pts0[..., 1][part]) >= config.min_extent:
+            moved = part
     y, z, d = pts0[..., 1][moved] - centre[1], pts0[..., 2][moved] - centre[2], shift[moved]
-    whole = _fit_shift_plane(y, z, d, config.min_pixels)
-    if whole is None:
+    fit = _fit_shift_plane(y, z, d, config.min_pixels)
+    if fit is None:
         return None
-    coef, keep = whole
-    out = {"across": float(coef[1]), "up": float(coef[2]), "shift": float(coef[0]),
-           "spread": float(np.ptp(y[keep])), "pixels": int(keep.sum())}
-    # each side of the handle on its own: a double door's two leaves move apart, and one plane
-    # over both reads level where each of them turned
-    for name, side in (("across_left", y > 0), ("across_right", y < 0)):
-        part = _fit_shift_plane(y[side], z[side], d[side], config.min_pixels)
-        out[name] = float(part[0][1]) if part is not None else None
-    return out
+    coef, keep = fit
+    return {"across": float(coef[1]), "up": float(coef[2]), "shift": float(coef[0]),
+            "spread": float(np.ptp(y[keep])), "pixels": int(keep.sum()), "parts": int(n)}
 
 
 def _fit_shift_plane(y: np.ndarray, z: np.ndarray, d: np.ndarray, min_pixels: int):

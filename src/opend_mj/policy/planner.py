@@ -615,11 +615,10 @@ class Planner:
         cfg = self.config
         if front is None:
             return None
-        across = [abs(v) for v in (front["across"], front.get("across_left"), front.get("across_right"))
-                  if v is not None]
-        if max(across) >= cfg.front_door_slope or front["up"] >= cfg.front_door_slope:
+        if abs(front["across"]) >= cfg.front_door_slope or front["up"] >= cfg.front_door_slope:
             return "door"
-        if max(across + [abs(front["up"])]) <= cfg.front_drawer_slope and front["shift"] >= cfg.front_drawer_shift:
+        if max(abs(front["across"]), abs(front["up"])) <= cfg.front_drawer_slope \
+                and front["shift"] >= cfg.front_drawer_shift:
             return "drawer"
         return None
 
