@@ -237,10 +237,11 @@ def test_kind_from_the_held_path():
     assert planner.kind_from_track(list(flap))[0] == "door"
 
 
-def _front_depth(view, hinge, axis: str, angle_deg: float, shift: float = 0.0) -> np.ndarray:
-    """Depth image of a front 0.6 m wide and 0.5 m tall at x = 1 (camera at the origin looking
-    along +x), slid ``shift`` m toward the camera, or turned ``angle_deg`` about a hinge line through
-    ``hinge`` along z ("side") or y ("flap"); a wall 2 m behind it."""
+def _front_depth(view, hinge, axis: str, angle_deg: float, shift: float = 0.0, width: float = 0.6) -> np.ndarray:
+    """Depth image of a front ``width`` m wide (centred on y = 0) and 0.5 m tall at x = 1 (camera
+    at the origin looking along +x), slid ``shift`` m toward the camera, or turned ``angle_deg``
+    about a hinge line through ``hinge`` along z ("side", the front reaching ``width`` from it, on
+    the side of the sign of ``width``) or y ("flap"); a wall 2 m behind it."""
     h, w = view.height, view.width
     vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
     d = view.backproject(uu, vv, np.ones((h, w)))  # ray points at planar depth 1 (x = 1)
@@ -252,13 +253,13 @@ def _front_depth(view, hinge, axis: str, angle_deg: float, shift: float = 0.0) -
     p = d * depth[..., None]
     if angle_deg:
         along = np.array([-math.sin(t), math.cos(t), 0.0]) if axis == "side" else np.array([-math.sin(t), 0.0, math.cos(t)])
-        r = (p - hinge) @ along
+        r = (p - hinge) @ along * np.sign(width)
         if axis == "side":
-            on = (r >= 0) & (r <= 0.6) & (np.abs(p[..., 2]) <= 0.25)
+            on = (r >= 0) & (r <= abs(width)) & (np.abs(p[..., 2]) <= 0.25)
         else:
             on = (r >= 0) & (r <= 0.5) & (np.abs(p[..., 1]) <= 0.3)
     else:
-        on = (np.abs(p[..., 1]) <= 0.3) & (np.abs(p[..., 2]) <= 0.25)
+        on = (np.abs(p[..., 1]) <= abs(width) / 2) & (np.abs(p[..., 2]) <= 0.25)
     return np.where(on, depth, 3.0)
 
 
@@ -276,14 +277,18 @@ def test_kind_from_the_front_seen_moving():
     handle = np.array([0.97, 0.25, 0.0])  # near the free edge, 3 cm proud
     cases = {"drawer": _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.12),
              "door": _front_depth(view, (1.0, -0.3, 0.0), "side", 14.0),
-             "flap": _front_depth(view, (1.0, 0.0, -0.25), "flap", 20.0)}
+             "flap": _front_depth(view, (1.0, 0.0, -0.25), "flap", 20.0),
+             # a double door: the leaf pulled (hinged at y = -0.3) turned 14 degrees, the other
+             # (hinged at y = 0.3) dragged 6 degrees the other way; one plane over both is level
+             "double": np.minimum(_front_depth(view, (1.0, -0.3, 0.0), "side", 14.0, width=0.298),
+                                  _front_depth(view, (1.0, 0.3, 0.0), "side", -6.0, width=-0.298))}
     seen = {}
     for name, depth in cases.items():
         site = handle - np.array([0.12, 0.0, 0.0])
         front = front_motion(closed, depth, view, handle, 1.0, site)
         assert front is not None, name
         seen[name] = planner.kind_from_front(front)
-    assert seen == {"drawer": "drawer", "door": "door", "flap": "door"}, seen
+    assert seen == {"drawer": "drawer", "door": "door", "flap": "door", "double": "door"}, seen
     assert front_motion(closed, closed, view, handle, 1.0, handle) is None  # nothing moved: unclear
     assert planner.kind_from_front(None) is None
 
