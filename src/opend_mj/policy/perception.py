@@ -435,6 +435,10 @@ class FrontMotionConfig:
     min_shift: float = 0.02
     max_shift: float = 0.6
     hand_clear: float = 0.12
+    #: what is seen more than this (m) nearer the camera than the grasp site is the hand, not the
+    #: front it holds (a drawer's front stays behind its handle; a door's free edge beyond the
+    #: handle comes out a little ahead of it)
+    before_site: float = 0.03
     #: fewer moved pixels than this say nothing (a sliver of a front fits any slope)
     min_pixels: int = 200
     min_extent: float = 0.1
@@ -463,7 +467,9 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
                                  & (xs < edges[np.argmax(hist) + 1] + config.on_plane)]))
     sel = around & (np.abs(pts0[..., 0] - front_x) < config.on_plane)
     shift = pts0[..., 0] - pts1[..., 0]
-    clear = np.linalg.norm(pts1 - np.asarray(site, float), axis=-1) > config.hand_clear
+    site = np.asarray(site, float)
+    # not the hand: away from the grasp site, and not in front of it (the palm, the wrist)
+    clear = (np.linalg.norm(pts1 - site, axis=-1) > config.hand_clear) & (pts1[..., 0] >= site[0] - config.before_site)
     moved = sel & clear & (shift > config.min_shift) & (shift < config.max_shift)
     if int(moved.sum()) < config.min_pixels:
         return None
