@@ -240,13 +240,16 @@ class PlannerConfig:
     #: across it, or up it (a flap hinged at its bottom edge), by ``front_door_slope`` (m per m, the
     #: tangent of its angle) or more turned about a hinge; one level within ``front_drawer_slope``
     #: both ways that came ``front_drawer_shift`` (m) or more toward the camera slid out. From the
-    #: oracle's pulls, all four hands, as named and with each handle pulled as the other kind (no
-    #: wrong reading in any of them; the rest unclear: too little seen or moved):
-    #: real train part (764 + 764): doors 344 of 436 turned, drawers 276 of 328 level; pulled as
-    #: the other kind, doors 316 turned, drawers 288 level; procedural train split (1108 + 1108):
-    #: doors 604 of 612, drawers 490 of 496; PROC_SWAP. No door or drawer of these came within 0.07
-    #: of the other's threshold. ``front_retry_on``: the kinds whose sighting by the front gives a
-    #: handle up.
+    #: oracle's pulls, all four hands, as named and with each handle pulled as the other kind
+    #: (`tools/front_stats.py [--swap]`; the rest unclear: too little seen or moved): real train
+    #: part (764 + 764): doors 344 of 436 turned, drawers 276 of 328 level; pulled as the other
+    #: kind, doors 316 turned, drawers 288 level; procedural train split (1108 + 1108): doors 604 of
+    #: 612, drawers 490 of 496; pulled as the other kind, doors 553 turned, drawers 475 level. The
+    #: one wrong reading of the 3744: a drawer pulled as a door read turned (a 10 cm sliver beside
+    #: the hand, which gives nothing up: a door was named). No other came within 0.07 of the other
+    #: kind's threshold. A flap tips top first (``up`` > 0); a front whose bottom comes first is
+    #: none (two real drawers pulled as doors, ``up`` -0.10 and -0.13). ``front_retry_on``: the
+    #: kinds whose sighting by the front gives a handle up.
     front_door_slope: float = 0.1
     front_drawer_slope: float = 0.05
     front_drawer_shift: float = 0.05
