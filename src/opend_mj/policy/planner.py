@@ -247,9 +247,9 @@ class PlannerConfig:
     #: 612, drawers 490 of 496; pulled as the other kind, doors 553 turned, drawers 475 level. The
     #: one wrong reading of the 3744: a drawer pulled as a door read turned (a 10 cm sliver beside
     #: the hand, which gives nothing up: a door was named). No other came within 0.07 of the other
-    #: kind's threshold. A flap tips top first (``up`` > 0); a front whose bottom comes first is
-    #: none (two real drawers pulled as doors, ``up`` -0.10 and -0.13). ``front_retry_on``: the
-    #: kinds whose sighting by the front gives a handle up.
+    #: kind's threshold. A flap tips top first, so only ``up`` > 0 counts for a door (drawers
+    #: pulled as doors tipped bottom first by up to 0.09). ``front_retry_on``: the kinds whose
+    #: sighting by the front gives a handle up.
     front_door_slope: float = 0.1
     front_drawer_slope: float = 0.05
     front_drawer_shift: float = 0.05
