@@ -422,11 +422,11 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
 class FrontMotionConfig:
     """What :func:`front_motion` reads of two depth images of one front, before and during a pull.
 
-    Pixels that showed the front's plane (within ``on_plane`` m of the most common depth within
-    ``front_depth`` of the panel behind the handle and ``reach`` m of the handle across and up/down) and are now at least ``min_shift`` m
-    nearer, away from the hand (``hand_clear`` m around the grasp site), say how the front moved:
-    a drawer's front slides out level (the shift is the same across it), a door's turns (the shift
-    grows along it, the slope is the tangent of the door's angle)."""
+    Pixels that showed the front (within ``on_plane`` m of the most common depth within
+    ``front_depth`` m of the panel behind the handle, and ``reach`` m of the handle across and
+    up / down) and are now at least ``min_shift`` m nearer, away from the hand, say how the front
+    moved: a drawer's front slides out level (the shift is the same across it), a door's turns
+    (the shift grows along it, the slope is the tangent of the door's angle)."""
 
     on_plane: float = 0.015
     reach: tuple = (0.4, 0.3)
@@ -441,6 +441,8 @@ class FrontMotionConfig:
     before_site: float = 0.03
     #: fewer moved pixels than this say nothing (a sliver of a front fits any slope)
     min_pixels: int = 200
+    #: where the moved pixels fall apart, the part that moved most is read alone if it spans this
+    #: much (m) across
     min_extent: float = 0.1
 
 
@@ -455,7 +457,8 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     pts0 = view.point_cloud(np.where(np.isfinite(depth0), depth0, 1e3))
     pts1 = view.point_cloud(np.where(np.isfinite(depth1), depth1, 1e3))
     centre = np.asarray(centre, float)
-    around = ((np.abs(pts0[..., 1] - centre[1]) < config.reach[0]) & (np.abs(pts0[..., 2] - centre[2]) < config.reach[1])
+    around = ((np.abs(pts0[..., 1] - centre[1]) < config.reach[0])
+              & (np.abs(pts0[..., 2] - centre[2]) < config.reach[1])
               & (np.abs(pts0[..., 0] - panel_x) < config.front_depth))
     if not around.any():
         return None
@@ -463,13 +466,14 @@ def front_motion(depth0: np.ndarray, depth1: np.ndarray, view, centre, panel_x: 
     # ring can sit on a lip or a frame beside the front)
     xs = pts0[..., 0][around]
     hist, edges = np.histogram(xs, bins=np.arange(xs.min(), xs.max() + 2 * config.on_plane, config.on_plane))
-    front_x = float(np.median(xs[(xs >= edges[np.argmax(hist)] - config.on_plane)
-                                 & (xs < edges[np.argmax(hist) + 1] + config.on_plane)]))
+    peak = int(np.argmax(hist))
+    front_x = float(np.median(xs[(xs >= edges[peak] - config.on_plane) & (xs < edges[peak + 1] + config.on_plane)]))
     sel = around & (np.abs(pts0[..., 0] - front_x) < config.on_plane)
     shift = pts0[..., 0] - pts1[..., 0]
     site = np.asarray(site, float)
     # not the hand: away from the grasp site, and not in front of it (the palm, the wrist)
-    clear = (np.linalg.norm(pts1 - site, axis=-1) > config.hand_clear) & (pts1[..., 0] >= site[0] - config.before_site)
+    clear = (np.linalg.norm(pts1 - site, axis=-1) > config.hand_clear) \
+        & (pts1[..., 0] >= site[0] - config.before_site)
     moved = sel & clear & (shift > config.min_shift) & (shift < config.max_shift)
     if int(moved.sum()) < config.min_pixels:
         return None

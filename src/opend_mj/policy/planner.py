@@ -450,6 +450,9 @@ class Planner:
         self.grasp = grasp
         self.config = grasp.apply(config) if grasp is not None else config
         self.on_stage = on_stage
+        #: the episode's first observation and the handle being pulled (the front check reads them)
+        self._first: Observation | None = None
+        self._pulled_handle = None
 
     # ---------------------------------------------------------------- helpers
     def _stage(self, result: PlanResult, name: str, **info) -> None:
@@ -492,7 +495,7 @@ class Planner:
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         result.target_kind = target_kind(obs.instruction)
-        self._first = obs
+        self._first = obs  # the image a pulled front's motion is measured against
         observed: tuple = ()
         handle, box = self.locate(robot, obs, result)
         if handle is None:
@@ -628,8 +631,8 @@ class Planner:
     def front_seen(self, robot, site) -> dict | None:
         """How the pulled handle's front moved since the first image (:func:`front_motion`), where
         the robot can look again."""
-        look = getattr(robot, "look", None)
-        handle, first = getattr(self, "_pulled_handle", None), getattr(self, "_first", None)
+        look = getattr(robot, "look", None)  # (a robot of another kind may have none)
+        handle, first = self._pulled_handle, self._first
         if look is None or handle is None or first is None or first.depth is None:
             return None
         depth = look()
