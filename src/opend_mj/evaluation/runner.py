@@ -151,6 +151,20 @@ def make_episode_env(job: EpisodeJob):
 
 def _run_episode(job: EpisodeJob, env=None) -> dict:
     """One episode. ``env``: a scene built for a job with the same `scene_key` (else a new one)."""
+    from opend_mj.sim.camera import RGBDCamera
+
+    if env is None:
+        env = make_episode_env(job)
+    else:
+        env.task.set_target(job.joint, instruction_for(job))
+    env.reset()
+    size = env.task.config.image_size
+    # the episode's camera: the first observation, and the planner's looks mid-pull
+    with RGBDCamera(env.physics, "front", size, size) as cam:
+        return _run_episode_with_camera(job, env, cam)
+
+
+def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     from opend_mj.policy.planner import (
         GraspProfile,
         Observation,
@@ -159,26 +173,15 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         Robot,
     )
     from opend_mj.policy.solvers import get_solver, needs_ground_truth
-    from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.hands import load_spec
 
-    if env is None:
-        env = make_episode_env(job)
-    else:
-        env.task.set_target(job.joint, instruction_for(job))
     task = env.task
     config = task.config
-    env.reset()
     physics = env.physics
     target = task.target
     instruction = task.instruction
 
-    # the one observation
-    cam = RGBDCamera(physics, "front", config.image_size, config.image_size)
-    try:
-        rgb, depth = cam.render()
-    finally:
-        cam.close()
+    rgb, depth = cam.render()  # the one observation
     view = task.camera_view(physics)
     gt_box = task.handle_boxes(physics)[target.joint]
 
@@ -213,14 +216,7 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
         if video:
             video.capture()
 
-    looks: list = []
-
-    def look():  # the same camera again, mid-episode (the planner watches a front move)
-        if not looks:
-            looks.append(RGBDCamera(physics, "front", config.image_size, config.image_size))
-        return looks[0].render()[1]
-
-    robot = Robot(_StopAtLast(env), on_step=on_step, look=look)
+    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: cam.render()[1])
     overrides = dict(job.planner_overrides)
     pconfig = replace(PlannerConfig(pull=job.pull))
     grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
@@ -240,8 +236,6 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
     finally:
         if video:
             video.close()
-        for cam in looks:
-            cam.close()
     outcome = task.outcome(physics)
 
     # failure stage (ground truth, for the tables)

@@ -615,6 +615,31 @@ class Planner:
             return "drawer", turn, tilt
         return None, turn, tilt
 
+    def judge_kind(self, robot, site, state: PullState, result: PlanResult) -> bool | None:
+        """The held handle's kind, from its path and from the front seen moving (both logged in
+        ``result.events``): True where it is the other kind than the instruction's and is to be
+        given up (``state.seen_kind``, ``seen_by``, ``seen_turn`` set), False where not, None
+        where the path does not tell yet."""
+        cfg = self.config
+        seen, turn, tilt = self.kind_from_track(state.track[state.pull_start:])
+        if turn is None:
+            return None
+        result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2), "tilt_deg": round(tilt, 2)})
+        front = self.front_seen(robot, site)
+        front_kind = self.kind_from_front(front)
+        if front is not None:
+            result.events.append({"front_seen": front, "front_kind": front_kind})
+        wrong = None  # (kind, what showed it); the path and the front must not disagree
+        if front_kind in cfg.front_retry_on and front_kind != result.target_kind and seen in (None, front_kind):
+            wrong = (front_kind, "front")
+        elif seen in cfg.kind_retry_on and seen != result.target_kind and front_kind in (None, seen):
+            wrong = (seen, "path")
+        if wrong is None or not self.checks_kind():
+            return False
+        state.seen_kind, state.seen_by = wrong
+        state.seen_turn = turn
+        return True
+
     def kind_from_front(self, front: dict | None) -> str | None:
         """"door" for a front that turned, "drawer" for one that slid out level, None where unclear
         (or not seen)."""
@@ -917,25 +942,10 @@ class Planner:
                         held_path += float(np.linalg.norm(site - state.track[-1]))
                     state.track.append(site.copy())
                     if watch_kind and held_path >= cfg.kind_check_distance - 1e-9:
-                        seen, turn, tilt = self.kind_from_track(state.track[state.pull_start:])
-                        if turn is not None:
+                        verdict = self.judge_kind(robot, site, state, result)
+                        if verdict is not None:
                             watch_kind = False  # judged once per pull
-                            result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2),
-                                                  "tilt_deg": round(tilt, 2)})
-                            front = self.front_seen(robot, site)
-                            front_kind = self.kind_from_front(front)
-                            if front is not None:
-                                result.events.append({"front_seen": front, "front_kind": front_kind})
-                            wrong = None  # (kind, what showed it); the path and the front must not disagree
-                            if front_kind in cfg.front_retry_on and front_kind != result.target_kind \
-                                    and seen in (None, front_kind):
-                                wrong = (front_kind, "front")
-                            elif seen in cfg.kind_retry_on and seen != result.target_kind \
-                                    and front_kind in (None, seen):
-                                wrong = (seen, "path")
-                            if wrong is not None and self.checks_kind():
-                                state.seen_kind, state.seen_by = wrong
-                                state.seen_turn = turn
+                            if verdict:
                                 return "wrong_kind"
             history.append(site.copy())
             if door and len(history) > cfg.direction_window:
