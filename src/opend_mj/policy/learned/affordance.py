@@ -297,7 +297,7 @@ class CLIPortSolver:
 
     def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
                  canonical: bool = True, proposals: bool = True, plausible_fraction: float = 0.05,
-                 heat_sigma: float = 6.0):
+                 heat_sigma: float = 6.0, thin: bool = True, thin_fraction: float = 0.5):
         self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
         self.min_box = min_box
         #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
@@ -308,6 +308,10 @@ class CLIPortSolver:
         self.proposals = proposals
         self.plausible_fraction = plausible_fraction
         self.heat_sigma = heat_sigma
+        #: Thin pulls (:func:`opend_mj.policy.perception.thin_proposals`) join the proposals where
+        #: the map itself peaks on them: ``thin_fraction`` of its maximum or more.
+        self.thin = thin
+        self.thin_fraction = thin_fraction
         self.last_map: np.ndarray | None = None
 
     #: :meth:`solve` takes ``observed``: handles whose kind the robot saw by moving them.
@@ -324,14 +328,23 @@ class CLIPortSolver:
         prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
         self.last_map = prob
         if self.proposals and camera_view is not None:
-            from opend_mj.policy.perception import handle_proposals
-
-            chosen = choose_proposal(prob, handle_proposals(depth, camera_view), instruction, depth, camera_view,
+            chosen = choose_proposal(prob, self._proposals(prob, depth, camera_view), instruction, depth, camera_view,
                                      self.plausible_fraction, self.heat_sigma, observed=tuple(observed))
             if chosen is not None:
                 return HandleBox(*chosen, orientation=None, score=float(prob.max()), from_depth=True)
         _, box, orientation, peak = map_to_box(prob, min_box=self.min_box)
         return HandleBox(*box, orientation=orientation, score=peak)
+
+    def _proposals(self, prob: np.ndarray, depth, camera_view) -> list:
+        """The depth proposals, and the thin ones the map peaks on (see ``thin``)."""
+        from opend_mj.policy.perception import handle_proposals, thin_proposals
+
+        main = handle_proposals(depth, camera_view)
+        if not self.thin:
+            return main
+        top = float(prob.max())
+        return main + [(b, m) for b, m in thin_proposals(depth, camera_view, main)
+                       if float(prob[b[1]:b[3], b[0]:b[2]][m].max()) >= self.thin_fraction * top]
 
 
 def config_dict(config: AffordanceConfig) -> dict:

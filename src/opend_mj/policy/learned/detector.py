@@ -530,13 +530,16 @@ def detect_handles(model, rgb: np.ndarray, extra_boxes=None, nms_iou: float = 0.
         heads = model.roi_heads
 
         def head(boxes):
+            """(class probabilities, kind probabilities among the handle classes, box regression).
+            The kind is a softmax over the handle classes' logits, not the handle classes'
+            probabilities divided by 1 - background: where the head is sure a box is background,
+            that division is noise over noise in float32 (kinds of 0.0 or 55.8 on real proposals)."""
             feats = heads.box_head(heads.box_roi_pool(features, [boxes], images.image_sizes))
             logits, regression = heads.box_predictor(feats)
-            return torch.softmax(logits, -1), regression
+            return torch.softmax(logits, -1), torch.softmax(logits[:, 1:], -1), regression
 
-        probs, regression = head(proposals[0])
+        probs, kind_p, regression = head(proposals[0])
         handle = 1.0 - probs[:, 0]
-        kind_p = probs[:, 1:] / handle.clamp_min(1e-9)[:, None]
         best = probs[:, 1:].argmax(1) + 1
         decoded = heads.box_coder.decode(regression, [proposals[0]]).reshape(len(proposals[0]), -1, 4)
         boxes = decoded[torch.arange(len(best), device=device), best]
@@ -548,9 +551,8 @@ def detect_handles(model, rgb: np.ndarray, extra_boxes=None, nms_iou: float = 0.
         keep = batched_nms(boxes, handle, torch.zeros(len(boxes), dtype=torch.int64, device=device), nms_iou)
         boxes, handle, kind_p = boxes[keep] / scale, handle[keep], kind_p[keep]
         if len(extra):
-            eprobs, _ = head(extra)
+            eprobs, ekind, _ = head(extra)
             ehandle = 1.0 - eprobs[:, 0]
-            ekind = eprobs[:, 1:] / ehandle.clamp_min(1e-9)[:, None]
         else:
             ehandle, ekind = torch.zeros(0, device=device), torch.zeros((0, probs.shape[1] - 1), device=device)
     found = Detections(boxes.cpu().numpy().reshape(-1, 4), handle.cpu().numpy(), kind_p.cpu().numpy())
@@ -591,6 +593,12 @@ class MatchConfig:
     #: 38 doors, 78 drawers; no prior there). 1: no prior.
     vertical_door_odds: float = 56.0 / 3.0
     vertical_aspect: float = 2.5
+    #: Thin pulls (:func:`opend_mj.policy.perception.thin_proposals`: a few millimetres proud, which
+    #: depth alone cannot tell from a front's moulding, while the detector alone calls seams handles
+    #: on real images) join the candidates where a detection of handle probability
+    #: ``thin_threshold`` or more covers them: both must agree.
+    thin: bool = True
+    thin_threshold: float = 0.9
 
 
 def observed_members(boxes: np.ndarray, observed: tuple) -> list[tuple[int, str]]:
@@ -718,13 +726,24 @@ class FasterRCNNSolver:
 
         if self.canonical:
             instruction = canonical_instruction(instruction)
-        extra = None
+        extra = thin = None
         if self.match.use_proposals and depth is not None and camera_view is not None:
-            from opend_mj.policy.perception import handle_proposals
+            from opend_mj.policy.perception import handle_proposals, thin_proposals
 
-            extra = np.array([box for box, _ in handle_proposals(depth, camera_view)], float).reshape(-1, 4)
-        found, scored = detect_handles(self.model, rgb, extra, depth=depth)
+            main = handle_proposals(depth, camera_view)
+            extra = np.array([box for box, _ in main], float).reshape(-1, 4)
+            thin = np.array([box for box, _ in (thin_proposals(depth, camera_view, main) if self.match.thin else [])],
+                            float).reshape(-1, 4)
+        found, scored = detect_handles(self.model, rgb, None if extra is None else np.concatenate([extra, thin]),
+                                       depth=depth)
         self.last_detections = found
+        if thin is not None and len(thin):
+            # a thin group stays only where a sure detection covers it
+            sure = found.boxes[found.handle >= self.match.thin_threshold]
+            held = np.concatenate([np.ones(len(extra), bool),
+                                   centres_overlap(thin, sure).any(1) if len(sure) else np.zeros(len(thin), bool)])
+            scored = Detections(scored.boxes[held], scored.handle[held], scored.kind[held])
+            extra = scored.boxes
         chosen = select_handle(found, scored if extra is not None else None, instruction, depth, camera_view,
                                self.match, observed=tuple(observed))
         if chosen is None:
