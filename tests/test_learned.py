@@ -622,3 +622,96 @@ def test_a_vertical_bar_called_a_drawer_is_read_as_a_door():
     assert not np.allclose(select_handle(found, None, "door", config=no_prior)[0], boxes[0])
     k = vertical_bar_prior(np.array(boxes), np.array(kind), 10.0)
     assert np.allclose(k.sum(1), 1.0) and 0.1 < k[0, 1] < 0.5 and np.allclose(k[1:], kind[1:])
+
+
+# --------------------------------------------------------------------------------------------------
+# Thin pulls: a few millimetres proud, offered by depth, kept where the learned model agrees
+# --------------------------------------------------------------------------------------------------
+
+
+def _thin_pulls_depth():
+    """A cabinet front 2 m away with three drawer pulls in a column: the top one 3 cm proud, the
+    middle and bottom ones 5 mm proud (thin pulls, like real 7 mm bars 4.5 mm off a front), and a
+    rail 5 mm proud along the whole top of the front (0.8 m; no pull)."""
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[70:73, 100:150] = 1.97
+    depth[120:122, 100:150] = 1.995
+    depth[170:172, 100:150] = 1.995
+    depth[46:48, 44:212] = 1.995
+    return depth
+
+
+def test_thin_pulls_are_offered_where_depth_alone_misses_them():
+    from opend_mj.policy.perception import ThinProposalConfig, handle_proposals, thin_proposals
+
+    depth, view = _thin_pulls_depth(), _front_view()
+    main = handle_proposals(depth, view)
+    assert [b[1] for b, _ in main] == [70], main  # only the pull standing 3 cm proud
+    thin = sorted(b for b, _ in thin_proposals(depth, view, main))
+    # the two thin pulls; not the top one again, not the rail (longer than a pull)
+    assert [(v0, v1) for _, v0, _, v1 in thin] == [(120, 122), (170, 172)], thin
+    assert all(abs(u0 - 100) <= 1 and abs(u1 - 150) <= 1 for u0, _, u1, _ in thin)
+    assert thin_proposals(depth, view, main, ThinProposalConfig(min_protrusion=0.0)) == []
+
+
+def test_a_thin_pull_is_a_candidate_only_where_the_model_points_at_it():
+    """CLIPort keeps a thin group its map peaks on; Faster R-CNN one a sure detection covers. Then
+    "bottom drawer" is the bottom pull, not the only pull depth alone sees."""
+    from types import SimpleNamespace
+
+    from opend_mj.policy.learned.affordance import CLIPortSolver, choose_proposal
+    from opend_mj.policy.learned.detector import confirmed
+
+    depth, view = _thin_pulls_depth(), _front_view()
+    prob = np.zeros((256, 256), np.float32)
+    prob[165:178, 100:150] = 0.8  # the map: the bottom pull
+    prob[65:78, 100:150] = 0.3
+    solver = SimpleNamespace(thin=True, thin_fraction=0.5)
+    proposals = CLIPortSolver._proposals(solver, prob, depth, view)
+    assert sorted(b[1] for b, _ in proposals) == [70, 170]  # not the middle pull: the map is 0 there
+    box = choose_proposal(prob, proposals, "bottom drawer", depth, view)
+    assert box[1] == 170, box
+    solver.thin = False
+    box = choose_proposal(prob, CLIPortSolver._proposals(solver, prob, depth, view), "bottom drawer", depth, view)
+    assert box[1] == 70, box  # without thin pulls, the one pull there is
+
+    found = _detections([[99, 119, 151, 123], [99, 169, 151, 173]], [0.95, 0.6], [[1, 0], [1, 0]])
+    thin = np.array([[100, 120, 150, 122], [100, 170, 150, 172], [60, 200, 90, 202]], float)
+    assert confirmed(thin, found, 0.9).tolist() == [True, False, False]
+    assert confirmed(thin, _detections([], [], []), 0.9).tolist() == [False, False, False]
+
+
+def test_a_raised_panels_frame_corner_is_no_handle():
+    """The corner of a raised panel's frame stands proud like a knob but is an L filling about half
+    its box (on real renders "bottom drawer" once landed on one below the bottom pull); a knob
+    fills most of its box and stays a proposal."""
+    from opend_mj.policy.perception import ProposalConfig, handle_proposals
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[180:190, 170:173] = 1.98  # an L: 10 x 10 px (6.5 cm), 3 px wide arms
+    depth[187:190, 170:180] = 1.98
+    depth[100:108, 100:108] = 1.97  # a knob
+    boxes = [box for box, _ in handle_proposals(depth, _front_view())]
+    assert boxes == [(100, 100, 108, 108)], boxes
+    kept = [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(min_fill=0.0))]
+    assert len(kept) == 2, kept
+
+
+def test_the_detectors_kind_calls_are_probabilities_where_it_sees_background(tiny_data):
+    """Boxes on a generated image's background: the head is sure they are no handle, and its kind
+    call among the handle classes is still a distribution (dividing by 1 - background once gave
+    rows of 0, or of 55, that Algorithm 1 read as sure calls)."""
+    from pathlib import Path
+
+    from opend_mj.policy.learned.data import load_images, load_records
+    from opend_mj.policy.learned.detector import detect_handles, load_detector
+
+    model, _, _ = load_detector(Path(__file__).resolve().parents[1] / "checkpoints" / "fasterrcnn.pt")
+    out, _ = tiny_data
+    rgb, depth, _ = load_images(out, load_records(out)[0])
+    boxes = np.array([[5, 5, 20, 8], [100, 230, 140, 236], [10, 100, 14, 140], [200, 20, 240, 24]], float)
+    _, scored = detect_handles(model, rgb, boxes, depth=depth)
+    assert np.all(scored.handle < 0.5)
+    assert np.all((scored.kind >= 0) & (scored.kind <= 1)) and np.allclose(scored.kind.sum(1), 1.0, atol=1e-5)

@@ -696,6 +696,16 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
     return (boxes[i], float(handle[i])) if i is not None else None
 
 
+def confirmed(boxes: np.ndarray, found: Detections, threshold: float) -> np.ndarray:
+    """(N,) bool: which ``boxes`` a detection of handle probability ``threshold`` or more covers
+    (either holds the other's centre)."""
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    sure = found.boxes[found.handle >= threshold]
+    if not len(boxes) or not len(sure):
+        return np.zeros(len(boxes), bool)
+    return centres_overlap(boxes, sure).any(1)
+
+
 class FasterRCNNSolver:
     """Handle solver: Faster R-CNN detections (and the depth proposals its head accepts) matched
     to the instruction with Algorithm 1; see :func:`select_handle`."""
@@ -738,10 +748,7 @@ class FasterRCNNSolver:
                                        depth=depth)
         self.last_detections = found
         if thin is not None and len(thin):
-            # a thin group stays only where a sure detection covers it
-            sure = found.boxes[found.handle >= self.match.thin_threshold]
-            held = np.concatenate([np.ones(len(extra), bool),
-                                   centres_overlap(thin, sure).any(1) if len(sure) else np.zeros(len(thin), bool)])
+            held = np.concatenate([np.ones(len(extra), bool), confirmed(thin, found, self.match.thin_threshold)])
             scored = Detections(scored.boxes[held], scored.handle[held], scored.kind[held])
             extra = scored.boxes
         chosen = select_handle(found, scored if extra is not None else None, instruction, depth, camera_view,
