@@ -667,7 +667,7 @@ def test_a_thin_pull_is_a_candidate_only_where_the_model_points_at_it():
     prob = np.zeros((256, 256), np.float32)
     prob[165:178, 100:150] = 0.8  # the map: the bottom pull
     prob[65:78, 100:150] = 0.3
-    solver = SimpleNamespace(thin=True, thin_fraction=0.5)
+    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=False)
     proposals = CLIPortSolver._proposals(solver, prob, depth, view)
     assert sorted(b[1] for b, _ in proposals) == [70, 170]  # not the middle pull: the map is 0 there
     box = choose_proposal(prob, proposals, "bottom drawer", depth, view)
@@ -680,6 +680,42 @@ def test_a_thin_pull_is_a_candidate_only_where_the_model_points_at_it():
     thin = np.array([[100, 120, 150, 122], [100, 170, 150, 172], [60, 200, 90, 202]], float)
     assert confirmed(thin, found, 0.9).tolist() == [True, False, False]
     assert confirmed(thin, _detections([], [], []), 0.9).tolist() == [False, False, False]
+
+
+def test_a_thin_pull_joins_where_it_stacks_under_a_handle():
+    """One pull design down a stack of drawers: a thin pull in the column of a proposal, of its
+    size, is a CLIPort candidate where the map is dark on it; a thin group of another size or
+    column (a moulding strip) is not."""
+    from types import SimpleNamespace
+
+    from opend_mj.policy.learned.affordance import CLIPortSolver, choose_proposal
+
+    depth, view = _thin_pulls_depth(), _front_view()
+    depth[195:197, 150:180] = 1.995  # a strip 5 mm proud, shorter, off the column
+    prob = np.zeros((256, 256), np.float32)
+    prob[65:78, 100:150] = 0.8  # the map sees only the top pull (the one standing 3 cm proud)
+    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=True)
+    proposals = CLIPortSolver._proposals(solver, prob, depth, view)
+    assert sorted(b[1] for b, _ in proposals) == [70, 120, 170], [b for b, _ in proposals]
+    assert choose_proposal(prob, proposals, "bottom drawer", depth, view)[1] == 170
+    solver.thin_stack = False
+    assert [b[1] for b, _ in CLIPortSolver._proposals(solver, prob, depth, view)] == [70]
+
+
+def test_a_pull_over_a_finger_recess_is_a_proposal():
+    """A pull 3 cm proud of its front, over a recess 10 cm deep: the ring around it lies in the
+    recess, 13 cm behind it, and is still the panel it sits on (a real bottom drawer's pull)."""
+    from opend_mj.policy.perception import ProposalConfig, handle_proposals
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[70:73, 100:150] = 1.97
+    depth[154:166, 96:154] = 2.10  # the recess
+    depth[158:161, 100:150] = 1.97  # the pull over it
+    boxes = [box for box, _ in handle_proposals(depth, _front_view())]
+    assert boxes == [(100, 70, 150, 73), (100, 158, 150, 161)], boxes
+    assert [box for box, _ in handle_proposals(depth, _front_view(), ProposalConfig(ring_depth=0.11))] \
+        == [(100, 70, 150, 73)]
 
 
 def test_a_raised_panels_frame_corner_is_no_handle():

@@ -322,6 +322,12 @@ class ProposalConfig:
     min_pixels: int = 3
     ring: int = 4
     ring_fraction: float = 0.6
+    #: How far (m) behind the group a ring pixel may lie and still be the panel it sits on (a pull
+    #: over a finger recess: the recess is panel too; the room behind a cabinet's corner is not).
+    #: 0.11 lost a real bottom drawer's pull over an 8 cm recess; 0.2 keeps it and changes nothing
+    #: else on the real train part (three draws) or the procedural train split; 0.3 loses targets
+    #: there (corners against a wall close behind).
+    ring_depth: float = 0.2
     max_short: float = 0.07
     max_long: float = 0.95
     #: A group too large or not ringed by a panel (a narrow cabinet's whole front stands proud of a
@@ -374,7 +380,7 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
             ring = ndimage.binary_dilation(own, iterations=r) & ~own
             behind = x[v0:v1, u0:u1][ring]
             on_panel = (behind > group_x + config.min_protrusion / 2) & \
-                       (behind < group_x + config.max_protrusion + 0.02)
+                       (behind < group_x + config.ring_depth)
             if behind.size == 0 or on_panel.mean() < config.ring_fraction:
                 return False
         rows, cols = mask.shape
