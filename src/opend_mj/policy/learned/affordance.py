@@ -351,7 +351,7 @@ class CLIPortSolver:
         thin = thin_proposals(depth, camera_view, main)
         peaked = [float(prob[b[1]:b[3], b[0]:b[2]][m].max()) >= self.thin_fraction * top for b, m in thin]
         if self.thin_stack and thin:
-            members = {i for i in range(len(main))} | {len(main) + i for i, p in enumerate(peaked) if p}
+            members = set(range(len(main))) | {len(main) + i for i, p in enumerate(peaked) if p}
             stack = drawer_stack(np.array([b for b, _ in main + thin], float), members)
             peaked = [p or len(main) + i in stack for i, p in enumerate(peaked)]
         return main + [t for t, p in zip(thin, peaked) if p]
