@@ -293,6 +293,23 @@ def test_kind_from_the_front_seen_moving():
     assert planner.kind_from_front(None) is None
 
 
+def test_a_drawer_pulled_for_a_named_door_is_given_up_by_its_front():
+    """Pulled as a door, the hand goes round a circle whatever the part does: its path reads "door"
+    even on a drawer, so the front's "drawer" decides. For a named drawer, a path and a front that
+    disagree still give nothing up, and neither does a handle read as the named kind."""
+    from opend_mj.policy.planner import Planner, PlannerConfig
+
+    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    assert planner.wrong_kind("door", "door", "drawer") == ("drawer", "front")
+    assert planner.wrong_kind("door", None, "drawer") == ("drawer", "front")
+    assert planner.wrong_kind("door", "door", "door") is None
+    assert planner.wrong_kind("door", "door", None) is None
+    assert planner.wrong_kind("drawer", "door", None) == ("door", "path")
+    assert planner.wrong_kind("drawer", "drawer", "door") is None  # they disagree: kept
+    assert planner.wrong_kind("drawer", "door", "drawer") is None
+    assert planner.wrong_kind("drawer", "drawer", "drawer") is None
+
+
 class _WrongKindFirst:
     """A learned-like solver whose first answer is the other kind's handle (``boxes["first"]``), and
     the named handle (``boxes["named"]``) once told what the first one showed."""

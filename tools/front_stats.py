@@ -37,20 +37,30 @@ def _work(group):
     return run_episode_group(group)
 
 
-def summarise(path: Path) -> str:
+def summarise(path: Path, swap: bool = False) -> str:
+    """How the fronts read per true kind, and how many handles the planner gives up
+    (`Planner.wrong_kind`: path and front read together) with each handle named as it is, or as
+    the other kind (``swap``: every give-up is then right)."""
     from opend_mj.policy.planner import Planner, PlannerConfig
 
     planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    other = {"door": "drawer", "drawer": "door"}
     counts: collections.Counter = collections.Counter()
+    given_up: collections.Counter = collections.Counter()
     for line in open(path):
         r = json.loads(line)
         front = r["front_seen"][0] if r.get("front_seen") else None
-        counts[(r["target_type"], planner.kind_from_front(front) or "unclear")] += 1
-    rows = [f"{path}: {sum(counts.values())} pulls"]
+        front_kind = planner.kind_from_front(front)
+        counts[(r["target_type"], front_kind or "unclear")] += 1
+        path_kind = r["kind_seen"][0][0] if r.get("kind_seen") else None
+        named = other.get(r["target_type"], r["target_type"]) if swap else r["target_type"]
+        given_up[r["target_type"]] += planner.wrong_kind(named, path_kind, front_kind) is not None
+    rows = [f"{path}: {sum(counts.values())} pulls" + (", each handle named as the other kind" if swap else "")]
     for kind in ("drawer", "door"):
         n = sum(v for (k, _), v in counts.items() if k == kind)
         rows.append(f"  {kind}s ({n}): read as " + ", ".join(f"{seen} {counts[(kind, seen)]}"
-                                                            for seen in ("drawer", "door", "unclear")))
+                                                            for seen in ("drawer", "door", "unclear"))
+                    + f"; given up {given_up[kind]}")
     return "\n".join(rows)
 
 
@@ -82,7 +92,7 @@ def main() -> None:
                 f.write(json.dumps({k: r.get(k) for k in keep}) + "\n")
             f.flush()
             bar.update(len(records))
-    print(summarise(args.out))
+    print(summarise(args.out, args.swap))
 
 
 if __name__ == "__main__":
