@@ -310,6 +310,31 @@ def test_a_drawer_pulled_for_a_named_door_is_given_up_by_its_front():
     assert planner.wrong_kind("drawer", "drawer", "drawer") is None
 
 
+def test_a_part_left_ajar_is_no_motion_of_the_next_front():
+    """A wrong handle pushed back may leave its part a few cm out. The next pulled front is measured
+    against an image taken after the push back, not the episode's first one, in which a wide
+    drawer left 7 cm out reads as a front that slid out level (a door under it taken for a drawer)."""
+    from types import SimpleNamespace
+
+    from opend_mj.policy.planner import Observation, Planner, PlannerConfig
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
+    ajar = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.07)  # after the push back
+    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    first = Observation(rgb=np.zeros((256, 256, 3), np.uint8), depth=closed, instruction="door", camera_view=view)
+    planner._first = first
+    planner._pulled_handle = SimpleNamespace(centre=np.array([0.97, 0.25, 0.0]), panel_x=1.0)
+    robot = SimpleNamespace(look=lambda: ajar)  # the next handle has not moved its front (yet)
+    site = np.array([0.85, 0.25, 0.0])
+    assert planner.kind_from_front(planner.front_seen(robot, site)) == "drawer"  # against the first image
+    planner._look_again(robot, first)
+    assert planner._first.rgb is first.rgb and planner._first.depth is ajar
+    assert planner.front_seen(robot, site) is None  # nothing moved since the push back
+
+
 class _WrongKindFirst:
     """A learned-like solver whose first answer is the other kind's handle (``boxes["first"]``), and
     the named handle (``boxes["named"]``) once told what the first one showed."""
@@ -372,4 +397,8 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     assert [(w["kind"], w["by"]) for w in rec["wrong_kind"]] == [("drawer", "front")], rec["wrong_kind"]
     assert len(_WrongKindFirst.calls) == 2 and _WrongKindFirst.calls[1][0][1] == "drawer"
     assert rec["success"] and rec["open_ratio"] > 0.2, rec
+    from opend_mj.policy.planner import Planner, PlannerConfig
+
+    reader = Planner(solver=None, spec=None, config=PlannerConfig())
+    assert [reader.kind_from_front(f) for f in rec["front_seen"]] == ["drawer", "door"], rec["front_seen"]
     # (the drawer is pushed back, but stays ~2 cm out: pulled as a door, the hand slid along its bar)

@@ -512,6 +512,7 @@ class Planner:
             result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
                                       "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
             self.push_back(robot, grasp, state)
+            self._look_again(robot, obs)
             if len(observed) >= cfg.max_target_tries or self._time_left(robot) < cfg.retarget_time:
                 status = "not_held"
                 break
@@ -541,6 +542,16 @@ class Planner:
         elif status != "done" and not result.pushed:
             result.failed_stage = "pull"
         return result
+
+    def _look_again(self, robot: Robot, obs: Observation) -> None:
+        """A new image for the next pulled front's motion to be measured against: a wrong handle
+        pushed back may leave its part ajar (a drawer a few cm out), which the first image would
+        show as the next front's motion (a drawer strip 7 cm out, read level across a door it
+        spans). The solver keeps reading the first image."""
+        look = getattr(robot, "look", None)
+        depth = look() if look is not None else None
+        if depth is not None:
+            self._first = replace(obs, depth=depth)
 
     def open_handle(self, robot: Robot, obs: Observation, handle, box, result: PlanResult):
         """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
