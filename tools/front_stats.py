@@ -20,6 +20,8 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 HANDS = ("franka", "allegro", "shadow", "skeleton")
+#: The kind a handle is named as with ``--swap``.
+OTHER_KIND = {"door": "drawer", "drawer": "door"}
 
 
 def _init(swap: bool) -> None:
@@ -27,8 +29,7 @@ def _init(swap: bool) -> None:
 
     if swap:
         named = planner.target_kind
-        other = {"door": "drawer", "drawer": "door"}
-        planner.target_kind = lambda instruction: other.get(named(instruction), named(instruction))
+        planner.target_kind = lambda instruction: OTHER_KIND.get(named(instruction), named(instruction))
 
 
 def _work(group):
@@ -44,7 +45,6 @@ def summarise(path: Path, swap: bool = False) -> str:
     from opend_mj.policy.planner import Planner, PlannerConfig
 
     planner = Planner(solver=None, spec=None, config=PlannerConfig())
-    other = {"door": "drawer", "drawer": "door"}
     counts: collections.Counter = collections.Counter()
     given_up: collections.Counter = collections.Counter()
     for line in open(path):
@@ -53,7 +53,7 @@ def summarise(path: Path, swap: bool = False) -> str:
         front_kind = planner.kind_from_front(front)
         counts[(r["target_type"], front_kind or "unclear")] += 1
         path_kind = r["kind_seen"][0][0] if r.get("kind_seen") else None
-        named = other.get(r["target_type"], r["target_type"]) if swap else r["target_type"]
+        named = OTHER_KIND.get(r["target_type"], r["target_type"]) if swap else r["target_type"]
         given_up[r["target_type"]] += planner.wrong_kind(named, path_kind, front_kind) is not None
     rows = [f"{path}: {sum(counts.values())} pulls" + (", each handle named as the other kind" if swap else "")]
     for kind in ("drawer", "door"):

@@ -512,7 +512,6 @@ class Planner:
             result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
                                       "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
             self.push_back(robot, grasp, state)
-            self._look_again(robot, obs)
             if len(observed) >= cfg.max_target_tries or self._time_left(robot) < cfg.retarget_time:
                 status = "not_held"
                 break
@@ -520,6 +519,7 @@ class Planner:
             if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
                 status = "not_held"
                 break
+            self._look_again(robot, obs)  # only where another handle is pulled
             handle, box = new_handle, new_box
         result.pulled = state.travelled
         result.turned_deg = state.turned
