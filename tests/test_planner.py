@@ -73,6 +73,49 @@ def test_estimate_handle_from_box_and_depth():
     assert np.allclose(est.centre, centre, atol=0.006), est.centre
 
 
+def test_a_box_holding_only_the_bar_reads_the_panel_around_it():
+    """A box snapped to the handle in depth holds only the bar's pixels, all standing out of the
+    panel: the panel is read from the depth just around the box (the hinge of a door is placed on
+    it), not from the box's far depths (the bar's). A box that shows the panel keeps its own."""
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+    from opend_mj.policy.perception import estimate_handle
+    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.handle import HandleBox
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    depth = np.full((256, 256), 1.0)  # the panel 1 m ahead
+    depth[120:124, 100:140] = 0.97  # the bar's top face, seen from the camera, 3 cm proud
+    depth[124:127, 100:140] = 0.96  # its front, 4 cm proud
+    tight = estimate_handle(HandleBox(100, 120, 140, 127), depth, view, PlannerConfig())
+    assert tight.front_x == pytest.approx(0.96, abs=0.002)
+    assert tight.panel_x == pytest.approx(1.0, abs=0.005), tight.panel_x  # was the bar's 0.97
+    loose = estimate_handle(HandleBox(96, 114, 144, 133), depth, view, PlannerConfig())
+    assert loose.panel_x == pytest.approx(1.0, abs=0.005)
+
+
+def test_a_door_pulled_past_its_stop_is_not_dragged_back():
+    """Without a hinge, the pull direction follows the handle. Once it has turned, a direction that
+    swings back by ``door_turn_back`` degrees is not taken: a door opens one way, and at its stop the
+    hand is pushed aside (taken, the hand's yaw followed the direction round and dragged the door
+    shut)."""
+    from opend_mj.policy.planner import Planner, PlannerConfig, PullState
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.hands import load_spec
+
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("skeleton"), PlannerConfig())
+    state = PullState(quat0=np.array([1.0, 0, 0, 0]))
+    state.peak_turn = -108.0
+    assert not planner._turned_back(state, -100.0)  # a wobble
+    assert planner._turned_back(state, -75.0)  # 33 degrees back toward closing
+    assert planner._turned_back(state, 40.0)
+    state.peak_turn = 20.0  # not turned enough yet: the direction is still settling
+    assert not planner._turned_back(state, -15.0)
+    off = Planner(planner.solver, planner.spec, PlannerConfig(door_turn_back=None))
+    state.peak_turn = -108.0
+    assert not off._turned_back(state, 40.0)
+
+
 def test_solver_registry():
     from opend_mj.policy.solvers import get_solver, list_solvers, needs_ground_truth, register_solver
 

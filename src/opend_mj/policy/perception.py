@@ -55,9 +55,7 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
     h, w = depth.shape
     # pixels per metre at the handle's distance (to size the search window)
     uc, vc = box.centre
-    p0 = _ray_plane_x(view, uc, vc, handle.front_x)
-    p1 = _ray_plane_x(view, uc + 10.0, vc, handle.front_x)
-    px_per_m = 10.0 / max(1e-6, float(np.linalg.norm(p1 - p0)))
+    px_per_m = _px_per_m(view, uc, vc, handle.front_x)
     m = int(math.ceil(radius * px_per_m))
     u0, v0 = int(max(0, math.floor(box.u0) - m)), int(max(0, math.floor(box.v0) - m))
     u1, v1 = int(min(w, math.ceil(box.u1) + m)), int(min(h, math.ceil(box.v1) + m))
@@ -67,11 +65,8 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
     pts = view.backproject(uu, vv, np.where(ok, d, 1.0))
     x = np.where(ok, pts[..., 0], np.inf)
     in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
-    # the panel: the most common depth just around the box (a tight box may hold only the bar)
-    g = 0.04 * px_per_m
-    ring = ok & ~in_box & (uu >= box.u0 - g) & (uu <= box.u1 + g) & (vv >= box.v0 - g) & (vv <= box.v1 + g)
-    panel_x = float(np.median(x[ring])) if ring.sum() >= 5 else handle.panel_x
-    panel_x = max(panel_x, handle.front_x)
+    panel_x = _panel_around(x, ok, in_box, uu, vv, box, px_per_m)
+    panel_x = max(panel_x if panel_x is not None else handle.panel_x, handle.front_x)
     # the bar: pixels in the box within a few mm of the handle's front
     bar = in_box & (x < handle.front_x + 0.006)
     m_per_px = 1.0 / px_per_m
@@ -115,6 +110,22 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
                 clear[key] = float(min(radius, np.min(dist[sel])))
     return HandleShape(thickness=float(thickness), length=float(length), gap=float(gap),
                        protrusion=float(protrusion), clear=clear)
+
+
+def _panel_around(x: np.ndarray, ok: np.ndarray, in_box: np.ndarray, uu: np.ndarray, vv: np.ndarray,
+                  box: HandleBox, px_per_m: float, band: float = 0.04) -> float | None:
+    """The panel's x: the most common depth (median) of the pixels in a band ``band`` (m) wide just
+    around the box (a tight box may hold only the bar); None where fewer than 5 pixels."""
+    g = band * px_per_m
+    ring = ok & ~in_box & (uu >= box.u0 - g) & (uu <= box.u1 + g) & (vv >= box.v0 - g) & (vv <= box.v1 + g)
+    return float(np.median(x[ring])) if ring.sum() >= 5 else None
+
+
+def _px_per_m(view, u: float, v: float, x: float) -> float:
+    """Pixels per metre on the plane of constant ``x`` around pixel (u, v)."""
+    p0 = _ray_plane_x(view, u, v, x)
+    p1 = _ray_plane_x(view, u + 10.0, v, x)
+    return 10.0 / max(1e-6, float(np.linalg.norm(p1 - p0)))
 
 
 def _ray_plane_x(view, u: float, v: float, x: float) -> np.ndarray:
@@ -234,8 +245,11 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEs
     xs = pts[:, 0]
     front_x = float(np.percentile(xs, 3))
     panel_x = float(np.percentile(xs, 95))
-    centre_x = front_x + config.handle_radius
     uc, vc = box.centre
+    around = _panel_behind_tight_box(box, depth, view, xs, front_x)
+    if around is not None:
+        panel_x = around
+    centre_x = front_x + config.handle_radius
     centre = _ray_plane_x(view, uc, vc, centre_x)
     # world extent of the box on the handle's plane
     c00 = _ray_plane_x(view, box.u0, box.v0, centre_x)
@@ -249,6 +263,34 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEs
     kind = "knob" if (long_ / short < config.knob_aspect and long_ < config.knob_size) else "bar"
     return HandleEstimate(centre=centre, orientation=orientation, kind=kind, size=(size_y, size_z),
                           front_x=front_x, panel_x=panel_x)
+
+
+def _panel_behind_tight_box(box: HandleBox, depth: np.ndarray, view, xs: np.ndarray, front_x: float,
+                            near: float = 0.01, panel_share: float = 0.1) -> float | None:
+    """The panel's x seen around a box that holds only the handle, else None.
+
+    A box snapped to the handle in depth (:func:`refine_box_with_depth`) is the handle's own
+    pixels, all standing out of the panel, so the far end of its depths is the bar, not the panel
+    (on 45385's low door bar 2 cm in front of it, which moved the door's hinge as much). Where
+    fewer than ``panel_share`` of the box's pixels are within ``near`` (m) of the depth just around
+    it (:func:`_panel_around`), that depth is the panel. A box that shows the panel between and
+    beside the bar (an annotated box, a loose one) keeps its own far depths."""
+    h, w = depth.shape
+    px_per_m = _px_per_m(view, *box.centre, front_x)
+    m = int(math.ceil(0.04 * px_per_m)) + 1
+    u0, v0 = int(max(0, math.floor(box.u0) - m)), int(max(0, math.floor(box.v0) - m))
+    u1, v1 = int(min(w, math.ceil(box.u1) + m)), int(min(h, math.ceil(box.v1) + m))
+    vv, uu = np.meshgrid(np.arange(v0, v1) + 0.5, np.arange(u0, u1) + 0.5, indexing="ij")
+    d = depth[v0:v1, u0:u1]
+    ok = np.isfinite(d) & (d > 0.05)
+    x = np.where(ok, view.backproject(uu, vv, np.where(ok, d, 1.0))[..., 0], np.inf)
+    in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
+    panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m)
+    if panel is None or panel <= front_x:
+        return None
+    if float(np.mean(np.abs(xs - panel) < near)) >= panel_share:
+        return None
+    return panel
 
 
 def door_edges(handle: HandleEstimate, depth: np.ndarray, view, tolerance: float = 0.03,

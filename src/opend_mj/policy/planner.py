@@ -86,6 +86,13 @@ class PlannerConfig:
     door_travel: float = 0.9
     #: door: stop turning once the motion direction turned by this much (deg)
     door_max_turn: float = 110.0
+    #: door, without a hinge: once the pull direction turned at least ``door_turn_back_after``
+    #: (deg), a direction that turns back by ``door_turn_back`` (deg) from the farthest turn is not
+    #: taken (a door opens one way). At the door's stop the hand is pushed aside, and the direction,
+    #: and the hand's yaw that follows it, swung round and dragged the door shut (45271's door at
+    #: 91 degrees: the yaw went round 200 degrees, the door closed to 28). None: always taken.
+    door_turn_back: float | None = 30.0
+    door_turn_back_after: float = 30.0
     #: stop pulling when the site moved less than ``stall_distance`` in ``stall_time`` seconds
     stall_time: float = 0.6
     stall_distance: float = 0.008
@@ -425,6 +432,8 @@ class PullState:
     angle0: float = 0.0
     sense: float = 0.0
     opened: float = 0.0  # the largest door angle (deg) reached while the grip held
+    peak_turn: float = 0.0  # the pull direction's farthest turn (deg, signed) without a hinge
+    held_back: bool = False  # a direction turning back from ``peak_turn`` was not taken
     #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
     pull_start: int = 0
     seen_kind: str | None = None
@@ -992,10 +1001,15 @@ class Planner:
                         # the handle turns the other way round: the hinge seen in depth is wrong
                         result.events.append({"hinge_pull_dropped": round(ang, 1)})
                         state.hinge = None
-                    if state.hinge is None and abs(ang) <= cfg.door_max_turn:
+                    back = state.hinge is None and self._turned_back(state, ang)
+                    if back and not state.held_back:
+                        state.held_back = True
+                        result.events.append({"door_turn_held": round(ang, 1), "from": round(state.peak_turn, 1)})
+                    if state.hinge is None and abs(ang) <= cfg.door_max_turn and not back:
                         direction = cand
                         state.direction = cand
                         state.turned = ang
+                        state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
                         yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
                         quat = turn_about_z(state.quat0, math.radians(yaw))
             if door and state.hinge is not None:
@@ -1036,6 +1050,15 @@ class Planner:
             if k > stall_n and float(np.linalg.norm(history[-1] - history[-1 - stall_n])) < cfg.stall_distance:
                 return "done"
         return "done"
+
+    def _turned_back(self, state: PullState, ang: float) -> bool:
+        """Whether a pull direction turned ``ang`` (deg) comes back ``door_turn_back`` or more from
+        a farthest turn of at least ``door_turn_back_after`` (such a direction is not taken)."""
+        cfg = self.config
+        peak = state.peak_turn
+        if cfg.door_turn_back is None or abs(peak) < cfg.door_turn_back_after:
+            return False
+        return math.copysign(1.0, peak) * (peak - ang) >= cfg.door_turn_back
 
     def _start_hinge_pull(self, state: PullState, site: np.ndarray, result: PlanResult) -> None:
         """Pull a door along the circle about the hinge seen in depth (kept across re-grasps)."""
