@@ -91,7 +91,7 @@ def test_thin_bar_close_to_the_panel_is_pinched(hand):
 def test_wide_bar_with_room_behind_is_hooked(hand):
     bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
     # the synthetic scene sits at z = 0: not a handle near the floor
-    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift={})
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift={}, min_grasp_height={})
     assert handle.kind == "bar"
     assert shape.thickness == pytest.approx(0.014, abs=0.005)
     assert shape.gap == pytest.approx(0.03, abs=0.008)
@@ -193,3 +193,21 @@ def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
     high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
     _, _, high = _choose("franka", [high_bar, *high_posts], high_bar, "door", kind="door")
     assert quat_to_mat(high.quat)[:, 2] == pytest.approx([1.0, 0.0, 0.0], abs=1e-6)
+
+
+def test_the_skeleton_grasps_no_lower_than_its_floor_clearance():
+    """The Skeleton's fingers point down behind a low bar and strike the floor below a grasp site
+    5 cm up: a door bar 3 cm above the floor is grasped at 5 cm (at its top edge), one 8 cm up at
+    its centre. Other hands keep their own lift."""
+    from opend_mj.policy.planner import PlannerConfig
+
+    floor = PlannerConfig().min_grasp_height["skeleton"]
+    low_bar, low_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.03)
+    handle, _, low = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door")
+    assert handle.centre[2] < floor - 0.015
+    assert low.pos[2] == pytest.approx(floor)
+    mid_bar, mid_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.08)
+    handle, _, mid = _choose("skeleton", [mid_bar, *mid_posts], mid_bar, "door", kind="door")
+    assert mid.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > floor
+    _, _, off = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door", min_grasp_height={})
+    assert off.pos[2] < floor - 0.015

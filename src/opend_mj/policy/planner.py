@@ -143,6 +143,11 @@ class PlannerConfig:
     #: without; the gripper's 21 cm body meets the floor whatever the lift: it pitches instead)
     low_handle_height: float = 0.10
     low_handle_lift: dict = field(default_factory=lambda: {"shadow": 0.03, "allegro": 0.06})
+    #: the lowest grasp site (m above the floor, per hand): the Skeleton's fingers, pointing down
+    #: behind a bar, strike the floor below a site this low and the approach stalls 3-4 cm short
+    #: (the real train part's two door bars 3.0 and 3.3 cm up: lost by every solver, opened by every
+    #: one with the site at 5 cm; handles at 4 cm and up opened without)
+    min_grasp_height: dict = field(default_factory=lambda: {"skeleton": 0.05})
     #: low horizontal bars: the approach is pitched down by this much (deg, per hand), from above and
     #: in front, so that a body wide along the finger axis (the gripper's, 21 cm) clears the floor
     #: below and the door behind. Tuned on the real train part (Franka: 150 -> 152-155 of 191 at
@@ -775,6 +780,10 @@ class Planner:
         if lift > 0.0 and low:
             pos = pos + np.array([0.0, 0.0, lift])
             result.events.append({"low_handle_lift": lift})
+        floor = cfg.min_grasp_height.get(self.spec.name)
+        if floor is not None and pos[2] < floor:
+            result.events.append({"min_grasp_height": [round(float(pos[2]), 4), floor]})
+            pos = np.array([pos[0], pos[1], float(floor)])
         pre = self.spec.pregrasp_profile(orientation)
         closed = self.closed_profile(orientation)
         if self.spec.hand_type == "parallel_gripper":
