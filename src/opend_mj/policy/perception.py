@@ -228,7 +228,8 @@ def one_of_paired_handles(box: HandleBox, depth: np.ndarray, min_protrusion: flo
 
 
 def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEstimate | None:
-    """Back-project the solver's box with the depth image into a 3D handle centre and orientation.
+    """Back-project the solver's box with the depth image into a 3D handle centre and orientation,
+    with the front of the handle and the panel behind it (:func:`_panel_behind_tight_box`).
 
     ``config``: the planner's settings (``handle_radius``, ``knob_aspect``, ``knob_size``)."""
     h, w = depth.shape

@@ -145,8 +145,9 @@ class PlannerConfig:
     low_handle_lift: dict = field(default_factory=lambda: {"shadow": 0.03, "allegro": 0.06})
     #: the lowest grasp site (m above the floor, per hand): the Skeleton's fingers, pointing down
     #: behind a bar, strike the floor below a site this low and the approach stalls 3-4 cm short
-    #: (the real train part's two door bars 3.0 and 3.3 cm up: lost by every solver, opened by every
-    #: one with the site at 5 cm; handles at 4 cm and up opened without)
+    #: (the real train part's handles 3.0-4.0 cm up, two door bars, a drawer bar and a knob: lost by
+    #: every solver, opened by every one with the site at 5 cm; one bar 4.1 cm up, opened without,
+    #: lost with it: the Skeleton is on an edge there, opened at 4.5 and 6 cm, lost at 5 and 5.5)
     min_grasp_height: dict = field(default_factory=lambda: {"skeleton": 0.05})
     #: low horizontal bars: the approach is pitched down by this much (deg, per hand), from above and
     #: in front, so that a body wide along the finger axis (the gripper's, 21 cm) clears the floor
