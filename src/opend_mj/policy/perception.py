@@ -52,19 +52,10 @@ class HandleShape:
 def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, view, radius: float = 0.15,
                    min_protrusion: float = 0.008) -> HandleShape:
     """Bar thickness, length, stand-off gap and the free space around the handle, from depth alone."""
-    h, w = depth.shape
     # pixels per metre at the handle's distance (to size the search window)
-    uc, vc = box.centre
-    px_per_m = _px_per_m(view, uc, vc, handle.front_x)
-    m = int(math.ceil(radius * px_per_m))
-    u0, v0 = int(max(0, math.floor(box.u0) - m)), int(max(0, math.floor(box.v0) - m))
-    u1, v1 = int(min(w, math.ceil(box.u1) + m)), int(min(h, math.ceil(box.v1) + m))
-    vv, uu = np.meshgrid(np.arange(v0, v1) + 0.5, np.arange(u0, u1) + 0.5, indexing="ij")
-    d = depth[v0:v1, u0:u1]
-    ok = np.isfinite(d) & (d > 0.05)
-    pts = view.backproject(uu, vv, np.where(ok, d, 1.0))
+    px_per_m = _px_per_m(view, *box.centre, handle.front_x)
+    uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(radius * px_per_m)))
     x = np.where(ok, pts[..., 0], np.inf)
-    in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
     panel_x = _panel_around(x, ok, in_box, uu, vv, box, px_per_m)
     panel_x = max(panel_x if panel_x is not None else handle.panel_x, handle.front_x)
     # the bar: pixels in the box within a few mm of the handle's front
@@ -110,6 +101,21 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
                 clear[key] = float(min(radius, np.min(dist[sel])))
     return HandleShape(thickness=float(thickness), length=float(length), gap=float(gap),
                        protrusion=float(protrusion), clear=clear)
+
+
+def _window(box: HandleBox, depth: np.ndarray, view, margin_px: int):
+    """The pixels of ``box`` grown by ``margin_px`` (clipped to the image): their centres (uu, vv),
+    which have a valid depth (ok), their world points (pts; invalid depths back-projected at 1 m)
+    and which lie in the box itself (in_box)."""
+    h, w = depth.shape
+    u0, v0 = int(max(0, math.floor(box.u0) - margin_px)), int(max(0, math.floor(box.v0) - margin_px))
+    u1, v1 = int(min(w, math.ceil(box.u1) + margin_px)), int(min(h, math.ceil(box.v1) + margin_px))
+    vv, uu = np.meshgrid(np.arange(v0, v1) + 0.5, np.arange(u0, u1) + 0.5, indexing="ij")
+    d = depth[v0:v1, u0:u1]
+    ok = np.isfinite(d) & (d > 0.05)
+    pts = view.backproject(uu, vv, np.where(ok, d, 1.0))
+    in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
+    return uu, vv, ok, pts, in_box
 
 
 def _panel_around(x: np.ndarray, ok: np.ndarray, in_box: np.ndarray, uu: np.ndarray, vv: np.ndarray,
@@ -276,16 +282,9 @@ def _panel_behind_tight_box(box: HandleBox, depth: np.ndarray, view, xs: np.ndar
     fewer than ``panel_share`` of the box's pixels are within ``near`` (m) of the depth just around
     it (:func:`_panel_around`), that depth is the panel. A box that shows the panel between and
     beside the bar (an annotated box, a loose one) keeps its own far depths."""
-    h, w = depth.shape
     px_per_m = _px_per_m(view, *box.centre, front_x)
-    m = int(math.ceil(0.04 * px_per_m)) + 1
-    u0, v0 = int(max(0, math.floor(box.u0) - m)), int(max(0, math.floor(box.v0) - m))
-    u1, v1 = int(min(w, math.ceil(box.u1) + m)), int(min(h, math.ceil(box.v1) + m))
-    vv, uu = np.meshgrid(np.arange(v0, v1) + 0.5, np.arange(u0, u1) + 0.5, indexing="ij")
-    d = depth[v0:v1, u0:u1]
-    ok = np.isfinite(d) & (d > 0.05)
-    x = np.where(ok, view.backproject(uu, vv, np.where(ok, d, 1.0))[..., 0], np.inf)
-    in_box = (uu >= box.u0) & (uu <= box.u1) & (vv >= box.v0) & (vv <= box.v1)
+    uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(0.04 * px_per_m)) + 1)
+    x = np.where(ok, pts[..., 0], np.inf)
     panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m)
     if panel is None or panel <= front_x:
         return None

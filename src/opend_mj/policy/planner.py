@@ -563,8 +563,7 @@ class Planner:
         pushed back may leave its part ajar (a drawer a few cm out), which the first image would
         show as the next front's motion (a drawer strip 7 cm out, read level across a door it
         spans). The solver keeps reading the first image."""
-        look = getattr(robot, "look", None)
-        depth = look() if look is not None else None
+        depth = _look(robot)
         if depth is not None:
             self._first = replace(obs, depth=depth)
 
@@ -694,11 +693,10 @@ class Planner:
     def front_seen(self, robot, site) -> dict | None:
         """How the pulled handle's front moved since the first image (:func:`front_motion`), where
         the robot can look again."""
-        look = getattr(robot, "look", None)  # (a robot of another kind may have none)
         handle, first = self._pulled_handle, self._first
-        if look is None or handle is None or first is None or first.depth is None:
+        if handle is None or first is None or first.depth is None:
             return None
-        depth = look()
+        depth = _look(robot)
         if depth is None:
             return None
         seen = front_motion(first.depth, depth, first.camera_view, handle.centre, handle.panel_x, site)
@@ -1186,6 +1184,13 @@ class Planner:
 
 #: the grasp-profile depth key of each style (``grasp_depth[style]`` wins where the profile has one)
 _STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
+
+
+def _look(robot) -> np.ndarray | None:
+    """A new depth image from the episode's camera, or None where the robot cannot look again
+    (a robot of another kind may have no ``look``)."""
+    look = getattr(robot, "look", None)
+    return look() if look is not None else None
 
 
 def _wrap(a: float) -> float:
