@@ -13,6 +13,15 @@ DRAWER = ("proc_0004", 4, "joint_0")
 DOOR = ("proc_0006", 6, "joint_0")
 
 
+def _forward_view():
+    """A 256 px camera (fovy 45 degrees) at the origin looking along +x (columns: right = -y,
+    up = +z, backward = -x)."""
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+
+
 @pytest.fixture(scope="session")
 def planner_cabinets(tmp_path_factory) -> dict[str, Path]:
     from opend_mj.assets.compiler import compile_cabinet
@@ -53,14 +62,11 @@ def test_oracle_opens(planner_cabinets, hand, which):
 
 def test_estimate_handle_from_box_and_depth():
     """A synthetic depth image: a bar 4 cm in front of a wall is located within a few millimetres."""
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import PlannerConfig
     from opend_mj.policy.handle import HandleBox
 
-    # camera at the origin looking along +x (columns: right = -y, up = +z, backward = -x)
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     depth = np.full((256, 256), 1.0)
     centre = np.array([0.953, 0.05, -0.02])  # bar centre, radius 7 mm, front at x = 0.946
     uv = view.project(np.array([centre + (-0.007, 0.1, 0), centre + (-0.007, -0.1, 0)]))
@@ -77,13 +83,11 @@ def test_a_box_holding_only_the_bar_reads_the_panel_around_it():
     """A box snapped to the handle in depth holds only the bar's pixels, all standing out of the
     panel: the panel is read from the depth just around the box (the hinge of a door is placed on
     it), not from the box's far depths (the bar's). A box that shows the panel keeps its own."""
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import PlannerConfig
     from opend_mj.policy.handle import HandleBox
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     depth = np.full((256, 256), 1.0)  # the panel 1 m ahead
     depth[120:124, 100:140] = 0.97  # the bar's top face, seen from the camera, 3 cm proud
     depth[124:127, 100:140] = 0.96  # its front, 4 cm proud
@@ -153,11 +157,9 @@ def test_target_kind_from_instruction():
 ])
 def test_infer_hinge_side_from_depth(handle_y, panel, expected, knob):
     """A synthetic door plane: the hinge is on the side where the plane reaches farther."""
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
     from opend_mj.policy.perception import HandleEstimate, infer_hinge_side
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
     on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))  # points at depth 1
     inside = (on_plane[:, 1] > panel[0]) & (on_plane[:, 1] < panel[1]) & (np.abs(on_plane[:, 2]) < 0.3)
@@ -183,12 +185,10 @@ def test_hinge_side_from_instruction():
 
 def test_refine_box_snaps_to_the_handle_in_depth():
     """A box that misses a handle by a few pixels is moved onto the part that stands out of the panel."""
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
     from opend_mj.policy.perception import refine_box_with_depth
     from opend_mj.policy.handle import HandleBox
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     depth = np.full((256, 256), 1.0)
     depth[100:140, 120:124] = 0.96  # a vertical bar 4 cm proud of the panel
     refined = refine_box_with_depth(HandleBox(127, 105, 133, 135), depth, view)
@@ -311,10 +311,8 @@ def test_kind_from_the_front_seen_moving():
     edge: the camera tells them apart whatever the hand's path did."""
     from opend_mj.policy.perception import front_motion
     from opend_mj.policy.planner import Planner, PlannerConfig
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     planner = Planner(solver=None, spec=None, config=PlannerConfig())
     closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
     handle = np.array([0.97, 0.25, 0.0])  # near the free edge, 3 cm proud
@@ -360,10 +358,8 @@ def test_a_part_left_ajar_is_no_motion_of_the_next_front():
     from types import SimpleNamespace
 
     from opend_mj.policy.planner import Observation, Planner, PlannerConfig
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+    view = _forward_view()
     closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
     ajar = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.07)  # after the push back
     planner = Planner(solver=None, spec=None, config=PlannerConfig())

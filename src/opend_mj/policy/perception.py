@@ -273,19 +273,19 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view, config) -> HandleEs
 
 
 def _panel_behind_tight_box(box: HandleBox, depth: np.ndarray, view, xs: np.ndarray, front_x: float,
-                            near: float = 0.01, panel_share: float = 0.1) -> float | None:
+                            near: float = 0.01, panel_share: float = 0.1, band: float = 0.04) -> float | None:
     """The panel's x seen around a box that holds only the handle, else None.
 
     A box snapped to the handle in depth (:func:`refine_box_with_depth`) is the handle's own
     pixels, all standing out of the panel, so the far end of its depths is the bar, not the panel
     (on 45385's low door bar 2 cm in front of it, which moved the door's hinge as much). Where
     fewer than ``panel_share`` of the box's pixels are within ``near`` (m) of the depth just around
-    it (:func:`_panel_around`), that depth is the panel. A box that shows the panel between and
-    beside the bar (an annotated box, a loose one) keeps its own far depths."""
+    it (:func:`_panel_around`, in a band ``band`` m wide), that depth is the panel. A box that shows
+    the panel between and beside the bar (an annotated box, a loose one) keeps its own far depths."""
     px_per_m = _px_per_m(view, *box.centre, front_x)
-    uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(0.04 * px_per_m)) + 1)
+    uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(band * px_per_m)) + 1)
     x = np.where(ok, pts[..., 0], np.inf)
-    panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m)
+    panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, band)
     if panel is None or panel <= front_x:
         return None
     if float(np.mean(np.abs(xs - panel) < near)) >= panel_share:
