@@ -149,7 +149,10 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
 @click.argument("results", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
 @click.option("--csv", "csv_path", type=click.Path(path_type=Path), default=None)
 @click.option("--plot", "plot_path", type=click.Path(path_type=Path), default=None)
-def score(results, csv_path, plot_path):
+@click.option("--summary", "summary_path", type=click.Path(path_type=Path), default=None,
+              help="also write per-hand aggregates (counts only, no cabinet ids) as JSON, e.g. "
+                   "results/real/oracle_all.json for `opend report`")
+def score(results, csv_path, plot_path, summary_path):
     """The paper's tables from one or more results files (Markdown to stdout)."""
     from opend_mj.evaluation.scoring import (
         load_records,
@@ -164,6 +167,28 @@ def score(results, csv_path, plot_path):
         write_csv(records, csv_path)
     if plot_path:
         plot_success(records, plot_path)
+    if summary_path:
+        from opend_mj.evaluation.report import write_summary
+
+        write_summary(records, summary_path, label=" ".join(str(p) for p in results))
+
+
+@click.command("report")
+@click.option("--results", "results_dir", type=click.Path(path_type=Path), default=Path("results"),
+              show_default=True, help="results/*.jsonl (generated) and results/real/*.json (real aggregates)")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("docs/results.md"), show_default=True)
+@click.option("--readme", type=click.Path(path_type=Path), default=Path("README.md"), show_default=True,
+              help="README whose results table (between its markers) is rewritten")
+@click.option("--no-readme", is_flag=True, help="write the results page only")
+def report(results_dir, out, readme, no_readme):
+    """Write docs/results.md and the README's results table from the results files."""
+    from opend_mj.evaluation.report import write_report
+
+    try:
+        path = write_report(results_dir, out, None if no_readme else readme)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(f"wrote {path}" + ("" if no_readme else f" and the table in {readme}"))
 
 
 @click.command("search-grasp")

@@ -1,0 +1,223 @@
+"""`opend report`: the current results page (`docs/results.md`) and the README's table, from results files.
+
+Generated cabinets are scored from their records (`results/*.jsonl`, committed). Real PartNet-Mobility
+cabinets are non-commercial data: their records stay under `build/`, and only per-hand aggregates
+(`opend score --summary results/real/<name>.json`, counts and rates, no cabinet ids) are committed and
+read here. So every figure in the page is computed from a file in the repository and cannot drift.
+
+Two success criteria are reported side by side: the paper's (open ratio above 20 %: drawer travel /
+drawer length, door angle / 180 degrees) and ManiSkill3's (the joint at 75 % of its range or more).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+HANDS = ("franka", "allegro", "shadow", "skeleton")
+HAND_TITLES = {"franka": "Franka gripper", "allegro": "Allegro", "shadow": "Shadow", "skeleton": "Skeleton"}
+#: The paper's grasp success with ground-truth handle boxes (its Table 2), per hand, percent.
+PAPER_ORACLE = {"franka": 73.4, "allegro": 72.8, "shadow": 54.8, "skeleton": 50.8}
+#: The paper's end-to-end test success range over its handle solvers (its Table 3), percent.
+PAPER_END_TO_END = "14.6-30.3"
+#: Success criteria: (key, title). ``open20``: open ratio > 0.2; ``range75``: joint >= 75 % of its range.
+CRITERIA = (("open20", "open ratio > 20 %"), ("open50", "open ratio > 50 %"), ("range75", ">= 75 % of range"))
+README_BEGIN = "<!-- results-table:begin (written by `opend report`) -->"
+README_END = "<!-- results-table:end -->"
+
+
+def succeeded(record: dict, criterion: str) -> bool:
+    """Whether one episode record succeeded under ``criterion`` (an error record never does)."""
+    if "error" in record:
+        return False
+    if criterion == "open20":
+        return float(record.get("open_ratio") or 0.0) > 0.2
+    if criterion == "open50":
+        return float(record.get("open_ratio") or 0.0) > 0.5
+    if criterion == "range75":
+        return float(record.get("range_ratio") or 0.0) >= 0.75
+    raise ValueError(f"unknown success criterion {criterion!r}; known: {[c for c, _ in CRITERIA]}")
+
+
+def summarize(records: list[dict]) -> dict:
+    """Per (solver, hand): episodes and successes under every criterion, by target kind and overall.
+
+    The result holds counts only (no cabinet ids), so it may be committed for real cabinets."""
+    out: dict[str, dict] = {}
+    for r in records:
+        cell = out.setdefault(r["solver"], {}).setdefault(r["hand"], {})
+        kinds = ["overall"] + ([r["target_type"]] if r.get("target_type") in ("drawer", "door") else [])
+        for kind in kinds:
+            counts = cell.setdefault(kind, {"episodes": 0, **{c: 0 for c, _ in CRITERIA}})
+            counts["episodes"] += 1
+            for c, _ in CRITERIA:
+                counts[c] += int(succeeded(r, c))
+    return out
+
+
+def write_summary(records: list[dict], path: Path, label: str = "") -> Path:
+    """Write :func:`summarize` of ``records`` as JSON (with how many cabinets and targets it covers)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {
+        "label": label,
+        "cabinets": len({r["cabinet"] for r in records}),
+        "targets": len({(r["cabinet"], r["joint"]) for r in records}),
+        "seeds": sorted({int(r.get("seed", 0)) for r in records}),
+        "scores": summarize(records),
+    }
+    path.write_text(json.dumps(payload, indent=1, sort_keys=True) + "\n")
+    return path
+
+
+@dataclass(frozen=True)
+class ResultSet:
+    """One column group of the results page: a solver on generated and on real cabinets."""
+
+    solver: str
+    title: str
+    generated: str  # results/<name>.jsonl (records)
+    real: str  # results/real/<name>.json (aggregates)
+    command: str
+
+
+RESULT_SETS = (
+    ResultSet("oracle", "oracle boxes", "oracle_test.jsonl", "oracle_all.json",
+              "opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split test"),
+    ResultSet("cliport", "CLIPort", "cliport_test.jsonl", "cliport_all.json",
+              "... --solver cliport"),
+    ResultSet("fasterrcnn", "Faster R-CNN", "fasterrcnn_test.jsonl", "fasterrcnn_all.json",
+              "... --solver fasterrcnn"),
+)
+#: Generated-split conditions reported below the main table: (file, what it varies).
+CONDITIONS = (
+    ("oracle_test_dt120.jsonl", "oracle, physics step 1/120 s"),
+    ("oracle_test_light07.jsonl", "oracle, light x 0.7"),
+    ("cliport_test_light07.jsonl", "CLIPort, light x 0.7"),
+    ("fasterrcnn_test_light07.jsonl", "Faster R-CNN, light x 0.7"),
+    ("cliport_test_paraphrase2.jsonl", "CLIPort, reworded instructions"),
+    ("fasterrcnn_test_paraphrase2.jsonl", "Faster R-CNN, reworded instructions"),
+)
+
+
+def _rate(cell: dict | None, criterion: str) -> str:
+    if not cell or not cell.get("episodes"):
+        return "-"
+    return f"{100.0 * cell[criterion] / cell['episodes']:.1f}"
+
+
+def _load_generated(path: Path) -> dict:
+    from opend_mj.evaluation.scoring import load_records
+
+    return summarize(load_records([path])) if path.is_file() else {}
+
+
+def _load_real(path: Path) -> tuple[dict, dict]:
+    if not path.is_file():
+        return {}, {}
+    payload = json.loads(path.read_text())
+    return payload["scores"], payload
+
+
+def _pair(scores: dict, solver: str, hand: str) -> str:
+    cell = scores.get(solver, {}).get(hand, {}).get("overall")
+    return f"{_rate(cell, 'open20')} / {_rate(cell, 'range75')}"
+
+
+def main_table(results_dir: Path) -> str:
+    """The README's table: every hand x (solver x generated / real), cells "> 20 % / >= 75 % of range"."""
+    results_dir = Path(results_dir)
+    header = ["hand"]
+    columns = []
+    for rs in RESULT_SETS:
+        generated = _load_generated(results_dir / rs.generated)
+        real, _ = _load_real(results_dir / "real" / rs.real)
+        columns.append((rs, generated, real))
+        header += [f"{rs.title}, generated", f"{rs.title}, real"]
+    header.append("the paper: oracle / end to end")
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for hand in HANDS:
+        row = [HAND_TITLES[hand]]
+        for rs, generated, real in columns:
+            row += [_pair(generated, rs.solver, hand), _pair(real, rs.solver, hand)]
+        row.append(f"{PAPER_ORACLE[hand]} / {PAPER_END_TO_END}")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _detail_table(scores: dict, solver: str) -> list[str]:
+    lines = ["| hand | drawers | doors | overall | episodes |", "|---|---|---|---|---|"]
+    for hand in HANDS:
+        cells = scores.get(solver, {}).get(hand)
+        if not cells:
+            continue
+        parts = []
+        for kind in ("drawer", "door", "overall"):
+            c = cells.get(kind)
+            parts.append(" / ".join(_rate(c, k) for k, _ in CRITERIA))
+        lines.append(f"| {HAND_TITLES[hand]} | " + " | ".join(parts) + f" | {cells['overall']['episodes']} |")
+    return lines
+
+
+def results_markdown(results_dir: Path) -> str:
+    """The whole results page."""
+    results_dir = Path(results_dir)
+    out = [
+        "# Results",
+        "",
+        "Written by `opend report` from the files under `results/`; do not edit by hand. Generated = the",
+        "procedural test split of the default build (`make quickstart`'s cabinets); real = all 133 OpenD",
+        "training cabinets of `../shared/opend-train` (PartNet-Mobility; only per-hand aggregates are committed,",
+        "under `results/real/`). Cells are success in percent: open ratio above 20 % (the paper's criterion) /",
+        "the joint at 75 % of its range or more (ManiSkill3's). Episode seed 0, each cabinet in a room of its own.",
+        "",
+        main_table(results_dir),
+    ]
+    for rs in RESULT_SETS:
+        generated = _load_generated(results_dir / rs.generated)
+        real, meta = _load_real(results_dir / "real" / rs.real)
+        out += [f"## {rs.title}", ""]
+        out += ["Cells: open ratio > 20 % / > 50 % / joint >= 75 % of its range.", ""]
+        if generated:
+            out += [f"Generated test split (`{rs.command} --out results/{rs.generated}`):", ""]
+            out += _detail_table(generated, rs.solver) + [""]
+        if real:
+            out += [f"Real cabinets ({meta.get('cabinets')} cabinets, {meta.get('targets')} targets; "
+                    f"`make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl "
+                    f"--summary results/real/{rs.real}`):", ""]
+            out += _detail_table(real, rs.solver) + [""]
+    rows = []
+    for name, title in CONDITIONS:
+        scores = _load_generated(results_dir / name)
+        for solver, hands in scores.items():
+            cells = [_pair(scores, solver, h) if h in hands else "-" for h in HANDS]
+            rows.append(f"| {title} (`results/{name}`) | " + " | ".join(cells) + " |")
+    if rows:
+        out += ["## Conditions (generated test split)", "",
+                "`make results` regenerates every file. Cells: > 20 % / >= 75 % of range.", "",
+                "| condition | " + " | ".join(HAND_TITLES[h] for h in HANDS) + " |", "|---" * 5 + "|"]
+        out += rows + [""]
+    return "\n".join(out)
+
+
+def update_readme(readme: Path, table: str) -> bool:
+    """Replace the README's results table between its markers; False when the markers are missing."""
+    text = Path(readme).read_text()
+    pattern = re.compile(re.escape(README_BEGIN) + r".*?" + re.escape(README_END), re.S)
+    if not pattern.search(text):
+        return False
+    new = pattern.sub(lambda _: f"{README_BEGIN}\n{table}{README_END}", text)
+    Path(readme).write_text(new)
+    return True
+
+
+def write_report(results_dir: Path, out: Path, readme: Path | None = None) -> Path:
+    """Write the results page to ``out`` and, where given, the README's table."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(results_markdown(results_dir))
+    if readme is not None and not update_readme(readme, main_table(results_dir)):
+        raise ValueError(f"{readme}: no results-table markers ({README_BEGIN!r} ... {README_END!r})")
+    return out

@@ -1,0 +1,79 @@
+"""`opend report` / `opend score --summary`: the results page comes from the results files, counts only."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from opend_mj.evaluation.report import (
+    README_BEGIN,
+    README_END,
+    main_table,
+    succeeded,
+    summarize,
+    update_readme,
+    write_report,
+    write_summary,
+)
+
+
+def _record(cabinet, joint, hand, kind, open_ratio, range_ratio, solver="oracle", **extra):
+    return {"cabinet": cabinet, "joint": joint, "hand": hand, "solver": solver, "split": "test", "seed": 0,
+            "target_type": kind, "open_ratio": open_ratio, "range_ratio": range_ratio, **extra}
+
+
+RECORDS = [
+    _record("c1", "joint_0", "allegro", "drawer", 0.9, 0.95),    # succeeds under every criterion
+    _record("c1", "joint_1", "allegro", "door", 0.3, 0.6),       # > 20 % only
+    _record("c2", "joint_0", "allegro", "door", 0.1, 0.2),       # fails
+    _record("c2", "joint_1", "allegro", "drawer", 0.8, 0.9, error="boom"),  # an error never succeeds
+]
+
+
+def test_criteria():
+    assert [succeeded(RECORDS[0], c) for c in ("open20", "open50", "range75")] == [True, True, True]
+    assert [succeeded(RECORDS[1], c) for c in ("open20", "open50", "range75")] == [True, False, False]
+    assert not any(succeeded(RECORDS[3], c) for c in ("open20", "open50", "range75"))
+    with pytest.raises(ValueError, match="unknown success criterion"):
+        succeeded(RECORDS[0], "open99")
+
+
+def test_summary_counts_by_kind():
+    cell = summarize(RECORDS)["oracle"]["allegro"]
+    assert cell["overall"] == {"episodes": 4, "open20": 2, "open50": 1, "range75": 1}
+    assert cell["door"] == {"episodes": 2, "open20": 1, "open50": 0, "range75": 0}
+    assert cell["drawer"]["episodes"] == 2
+
+
+def test_summary_file_holds_no_cabinet_ids(tmp_path):
+    path = write_summary(RECORDS, tmp_path / "real" / "oracle_all.json", label="x")
+    text = path.read_text()
+    assert "c1" not in text and "c2" not in text
+    payload = json.loads(text)
+    assert payload["cabinets"] == 2 and payload["targets"] == 4
+
+
+def test_report_and_readme_table(tmp_path):
+    results = tmp_path / "results"
+    (results / "real").mkdir(parents=True)
+    with open(results / "oracle_test.jsonl", "w") as f:
+        for r in RECORDS:
+            f.write(json.dumps(r) + "\n")
+    write_summary(RECORDS[:2], results / "real" / "oracle_all.json")
+    table = main_table(results)
+    allegro = next(line for line in table.splitlines() if line.startswith("| Allegro"))
+    cells = [c.strip() for c in allegro.strip("|").split("|")]
+    assert cells[1] == "50.0 / 25.0"      # generated: 2 of 4 > 20 %, 1 of 4 at 75 % of range
+    assert cells[2] == "100.0 / 50.0"     # real aggregates
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{README_BEGIN}\nold table\n{README_END}\nrest\n")
+    out = write_report(results, tmp_path / "docs" / "results.md", readme)
+    assert "50.0 / 25.0" in readme.read_text() and "old table" not in readme.read_text()
+    assert readme.read_text().endswith("rest\n")
+    assert "# Results" in out.read_text()
+    plain = tmp_path / "PLAIN.md"
+    plain.write_text("no markers\n")
+    assert update_readme(plain, table) is False
+    with pytest.raises(ValueError, match="no results-table markers"):
+        write_report(results, tmp_path / "docs" / "results.md", plain)
