@@ -41,11 +41,12 @@ results: install
 		$(RUN) $(HANDS) --solver $$s --paraphrase 2 --out results/$${s}_test_paraphrase2.jsonl || exit 1; done
 	for f in oracle_test oracle_test_dt120 $(LEARNED_RESULTS); do \
 		$(BIN)/opend score results/$$f.jsonl --plot results/$$f.png > /dev/null; done
+	$(BIN)/opend report
 
 ## Real cabinets: compile your PartNet-Mobility folder (SOURCE=..., optionally IDS=a,b,c), run the
-## oracle planner with all four hands on every target, and score it. The build's hash split is the
-## train part (tune on it) and the test part (report it as validation). Outputs stay under build/
-## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository.
+## oracle planner with all four hands on every target, and score it. Episode records stay under build/
+## (git-ignored): PartNet-Mobility is non-commercial, nothing built from it belongs in the repository;
+## only the per-hand aggregates (results/real/<solver>_<split><tag>.json) are written for `opend report`.
 ## SPLIT=test runs the validation part only; SOLVER=cliport or SOLVER=fasterrcnn runs a learned solver;
 ## RUN_ARGS='--light-scale 0.7' (or '--paraphrase 2', '--seed 1') with TAG=_light07 adds a condition.
 SOURCE ?= ../shared/opend-train
@@ -61,7 +62,7 @@ eval-real: install
 	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver $(SOLVER) --split $(SPLIT) \
 		--workers $(WORKERS) --cabinets $(REAL_CABINETS) $(RUN_ARGS) --out $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl
 	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl --csv $(REAL_OUT)/$(SOLVER)_scores$(TAG).csv \
-		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png
+		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:
