@@ -150,3 +150,47 @@ def small_dataset(proc_sources, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("small_dataset")
     build_dataset(proc_sources[:12], out, workers=2, progress=False, log=lambda *a: None)
     return out
+
+
+# Synthetic views for perception and solver tests (no rendering): a camera and depth images of a
+# cabinet front seen by it.
+
+
+@pytest.fixture
+def front_view():
+    """A camera at x = -2 looking along +x (right = -y, up = +z, backward = -x), 256 x 256, 45 degrees."""
+    import numpy as np
+
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), pos=np.array([-2.0, 0.0, 1.0]), rot=rot)
+
+
+@pytest.fixture
+def cabinet_depth():
+    """A wall 1 m behind a cabinet front (2 m away, image columns 40-216, rows 40-216) with two bars
+    3 cm proud of it: a horizontal one at the top left, a vertical one at the bottom right."""
+    import numpy as np
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[70:74, 60:110] = 1.97
+    depth[150:190, 180:184] = 1.97
+    return depth
+
+
+@pytest.fixture
+def thin_pulls_depth():
+    """A cabinet front 2 m away with three drawer pulls in a column: the top one 3 cm proud, the
+    middle and bottom ones 5 mm proud (thin pulls, like real 7 mm bars 4.5 mm off a front), and a
+    rail 5 mm proud along the whole top of the front (0.8 m; no pull)."""
+    import numpy as np
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[70:73, 100:150] = 1.97
+    depth[120:122, 100:150] = 1.995
+    depth[170:172, 100:150] = 1.995
+    depth[46:48, 44:212] = 1.995
+    return depth
