@@ -18,6 +18,12 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before any test module imports mujoco's renderer
+# One math-library thread per test process (torch, BLAS), set before anything imports them: the suite
+# runs in several processes (pytest-xdist), and idle OpenMP threads spinning beside another process
+# cost about three times the CPU of the work itself (the three torch training and detector tests:
+# 35 CPU s with the default threads, 11 CPU s with one, on the 2-core development machine).
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 pytest_plugins = ("pytester",)  # tests/test_ci_skips.py runs a small suite under this conftest
 
@@ -39,6 +45,24 @@ def _fail_unexplained_skip(report) -> None:
         report.outcome = "failed"
         report.longrepr = (f"skipped under CI ({reason}); only a missing ../shared (real data) or a missing "
                            "optional extra may skip there: make the test build what it needs, or fail")
+
+
+#: Session fixtures that compile cabinets, by the xdist group of the tests that use them.
+_SHARED_FIXTURE_GROUPS = {"real_cabinet": "compiled_cabinets", "any_cabinet": "compiled_cabinets",
+                          "proc_cabinets": "compiled_cabinets", "small_dataset": "small_dataset"}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Group tests for ``pytest -n N --dist loadgroup`` (as `make test` runs): the tests that use one
+    compiled-cabinet session fixture run in one process, so it is built once, not once per process;
+    every other test stays with its file (module fixtures, too, are built once)."""
+    for item in items:
+        if item.get_closest_marker("xdist_group"):
+            continue
+        group = next((g for name, g in _SHARED_FIXTURE_GROUPS.items() if name in item.fixturenames),
+                     item.nodeid.split("::")[0])
+        item.add_marker(pytest.mark.xdist_group(group))
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -362,7 +362,7 @@ class RoomArena(composer.Arena):
         return self.attach(cabinet_entity, self._cabinet_site)
 
     def add_camera(self, pose, name: str = "front"):
-        from .camera import add_camera
+        from opend_mj.sim.camera import add_camera
 
         return add_camera(self._mjcf_root, pose, name=name)
 
