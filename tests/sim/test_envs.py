@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-gym = pytest.importorskip("gymnasium")
-
+import gymnasium as gym  # noqa: E402
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
 from opend_mj.sim.envs import EnvConfig, OpenDCore, OpenDDmEnv  # noqa: E402
 

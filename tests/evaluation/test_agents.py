@@ -16,7 +16,7 @@ from opend_mj.cli import main
 from opend_mj.evaluation.episode import episode_key
 from opend_mj.evaluation.results import load_results
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "random_agent.py"
 
 

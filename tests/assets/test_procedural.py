@@ -13,9 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+import yourdfpy
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from opend_mj import language
 from opend_mj.assets.procedural import (
     PARTNET_SCALE,
     Box,
@@ -113,7 +115,6 @@ def test_piece_meshes_are_closed_convex_and_outward():
 
 
 def test_partnet_format(sources):
-    yourdfpy = pytest.importorskip("yourdfpy")
     for path in sources[:20]:
         urdf = yourdfpy.URDF.load(str(path / "mobility.urdf"), load_meshes=False, build_scene_graph=False)
         sem = _semantics(path)
@@ -387,7 +388,6 @@ def test_language_mix(sources):
 
 
 def test_language_rule_agrees_with_compiler(sources):
-    language = pytest.importorskip("opend_mj.language")
     for path in sources:
         m = _meta(path)["procedural"]
         layout = [language.TargetLayout(t["joint"], t["type"], -t["handle_center_m"][0], t["handle_center_m"][1])

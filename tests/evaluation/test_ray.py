@@ -22,7 +22,6 @@ HAND = "franka"
 
 @pytest.fixture(scope="module")
 def ray_instance():
-    pytest.importorskip("ray", reason="ray is not installed (pip install 'ray>=2.9')")
     from opend_mj.backends import BackendError, RayBackend
 
     try:
