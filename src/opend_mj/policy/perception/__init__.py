@@ -9,8 +9,9 @@
 * :mod:`.config`: :class:`PerceptionConfig`, the thresholds the planner's perception uses.
 """
 
-from opend_mj.policy.perception.front import FrontMotionConfig, front_motion
 from opend_mj.policy.perception.config import PerceptionConfig
+from opend_mj.policy.perception.door import door_edges, infer_hinge_side
+from opend_mj.policy.perception.front import FrontMotionConfig, front_motion
 from opend_mj.policy.perception.handle import (
     HandleEstimate,
     HandleShape,
@@ -20,7 +21,6 @@ from opend_mj.policy.perception.handle import (
     refine_box_with_depth,
     snaps_to_depth,
 )
-from opend_mj.policy.perception.door import door_edges, infer_hinge_side
 from opend_mj.policy.perception.proposals import (
     ProposalConfig,
     ThinProposalConfig,

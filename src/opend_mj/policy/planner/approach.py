@@ -90,7 +90,8 @@ class ApproachAndClose:
         return held
 
     def back_off(self, robot, g: GraspChoice) -> None:
-        """Open the fingers and move back along the approach axis."""
+        """Open the fingers and move back ``backoff_distance`` along the approach axis, at twice the
+        approach speed."""
         cfg = self.config.recovery
         site, squat = robot.site_pose()
         pre = g.pre
