@@ -5,7 +5,7 @@
     python tools/front_stats.py --cabinets build/opend-train --split train --swap --out build/fm/real_swap.jsonl
 
 ``--swap`` pulls every handle as the other kind (a drawer's as a door, a door's as a drawer): the pulls
-a learned solver's wrong handle gets. The thresholds in `PlannerConfig` (``front_*``) come from these
+a learned solver's wrong handle gets. The thresholds in `KindConfig` (``front_*``) come from these
 counts on the real train part and the procedural train split; resumable per results file.
 """
 
@@ -25,11 +25,11 @@ OTHER_KIND = {"door": "drawer", "drawer": "door"}
 
 
 def _init(swap: bool) -> None:
-    import opend_mj.policy.planner as planner
+    import opend_mj.policy.planner.loop as loop  # the stage loop reads the kind named
 
     if swap:
-        named = planner.target_kind
-        planner.target_kind = lambda instruction: OTHER_KIND.get(named(instruction), named(instruction))
+        named = loop.target_kind
+        loop.target_kind = lambda instruction: OTHER_KIND.get(named(instruction), named(instruction))
 
 
 def _work(group):

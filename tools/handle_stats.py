@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "all") -> dict[str, list[float]]:
     from opend_mj.assets.layout import load_manifest
     from opend_mj.policy.perception import estimate_handle, measure_handle
-    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.perception import PerceptionConfig
     from opend_mj.policy.handle import HandleBox
     from opend_mj.sim.cabinet import load_cabinet_info
     from opend_mj.sim.camera import RGBDCamera
@@ -58,7 +58,7 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
             if b is None:
                 continue
             box = HandleBox(*b)
-            handle = estimate_handle(box, depth, view, PlannerConfig())
+            handle = estimate_handle(box, depth, view, PerceptionConfig())
             if handle is None:
                 continue
             shape = measure_handle(handle, box, depth, view)

@@ -59,19 +59,26 @@ def _bar(thickness, gap, length=0.2, y=0.0, z=0.0, orientation="horizontal"):
     return bar, posts
 
 
-def _choose(hand, boxes, handle_box_world, instruction="top drawer", kind="drawer", **config):
+def _choose(hand, boxes, handle_box_world, instruction="top drawer", kind="drawer", overrides=None, **hand_numbers):
+    """The grasp chosen for a synthetic scene; ``overrides``: ``PlannerConfig.override`` keys;
+    ``hand_numbers``: fields of the hand's ``HandPlannerConfig`` to replace."""
+    from dataclasses import replace
+
     from opend_mj.policy.perception import estimate_handle
-    from opend_mj.policy.planner import Observation, PlanResult, Planner, PlannerConfig
+    from opend_mj.policy.planner import HandPlannerConfig, Observation, PlanResult, Planner, PlannerConfig
     from opend_mj.policy.solvers import get_solver
     from opend_mj.sim.hands import load_spec
 
     view = _view()
     depth = _render(view, boxes)
     box = _box_of(view, *handle_box_world)
-    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), load_spec(hand), PlannerConfig(**config))
+    spec = load_spec(hand)
+    numbers = replace(HandPlannerConfig.for_hand(spec), **hand_numbers)
+    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), spec,
+                      PlannerConfig().override(overrides or {}), hand=numbers)
     obs = Observation(rgb=None, depth=depth, instruction=instruction, camera_view=view)
     result = PlanResult(stage_reached="locate", failed_stage=None, target_kind=kind)
-    handle = estimate_handle(box, depth, view, planner.config)
+    handle = estimate_handle(box, depth, view, planner.config.perception)
     shape = planner.perceive(handle, box, obs, result)
     grasp = planner.choose_grasp(handle, shape, obs, result)
     return handle, shape, grasp
@@ -91,7 +98,7 @@ def test_thin_bar_close_to_the_panel_is_pinched(hand):
 def test_wide_bar_with_room_behind_is_hooked(hand):
     bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
     # the synthetic scene sits at z = 0: not a handle near the floor
-    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift={}, min_grasp_height={})
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift=0.0, min_grasp_height=None)
     assert handle.kind == "bar"
     assert shape.thickness == pytest.approx(0.014, abs=0.005)
     assert shape.gap == pytest.approx(0.03, abs=0.008)
@@ -152,14 +159,14 @@ def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
     down, away from the neighbour; without one they point up, whichever side the door hinges on."""
     from opend_mj.transforms import quat_to_mat
 
-    high = {"flip_below": -1.0}  # the synthetic scene sits at z = 0: not a handle near the floor
+    high = {"grasp.flip_below": -1.0}  # the synthetic scene sits at z = 0: not a handle near the floor
     bar, posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.0)
     other, other_posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.06)
-    _, shape, grasp = _choose(hand, [bar, *posts, other, *other_posts], bar, "bottom right door", kind="door", **high)
+    _, shape, grasp = _choose(hand, [bar, *posts, other, *other_posts], bar, "bottom right door", kind="door", overrides=high)
     assert shape.clear["up"] < 0.08 and shape.clear["down"] > 0.1
     fingers = quat_to_mat(grasp.quat)[:, 1]  # the open fingers point along site +y
     assert fingers[2] < -0.9
-    _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", **high)
+    _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", overrides=high)
     assert quat_to_mat(alone.quat)[:, 1][2] > 0.9
 
 
@@ -167,9 +174,11 @@ def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
 def test_a_bar_near_the_floor_is_grasped_from_above(hand):
     """A door bar 6 cm above the floor: the grasp site goes above the bar, so that the open fingers
     pointing down clear the floor; the same bar 30 cm up is grasped at its centre."""
-    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.planner import HandPlannerConfig
+    from opend_mj.sim.hands import load_spec
 
-    lift = PlannerConfig().low_handle_lift[hand]
+    lift = HandPlannerConfig.for_hand(load_spec(hand)).low_handle_lift
+    assert lift > 0.0
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
     handle, _, low = _choose(hand, [low_bar, *low_posts], low_bar, "door", kind="door")
     assert low.pos[2] == pytest.approx(handle.centre[2] + lift) and handle.centre[2] < 0.08
@@ -182,10 +191,12 @@ def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
     """The gripper's body is 21 cm wide along its finger axis: for a bar 6 cm above the floor it comes
     from above and in front, pitched down, so that the body's lower end stays above the floor and its
     upper end off the door; a bar 30 cm up is approached level."""
-    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.planner import HandPlannerConfig
+    from opend_mj.sim.hands import load_spec
     from opend_mj.transforms import quat_to_mat
 
-    pitch = np.radians(PlannerConfig().low_handle_pitch["franka"])
+    pitch = np.radians(HandPlannerConfig.for_hand(load_spec("franka")).low_handle_pitch)
+    assert pitch > 0.0
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
     _, _, low = _choose("franka", [low_bar, *low_posts], low_bar, "door", kind="door")
     approach = quat_to_mat(low.quat)[:, 2]
@@ -199,9 +210,10 @@ def test_the_skeleton_grasps_no_lower_than_its_floor_clearance():
     """The Skeleton's fingers point down behind a low bar and strike the floor below a grasp site
     5 cm up: a door bar 3 cm above the floor is grasped at 5 cm (at its top edge), one 8 cm up at
     its centre. Other hands keep their own lift."""
-    from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.planner import HandPlannerConfig
+    from opend_mj.sim.hands import load_spec
 
-    floor = PlannerConfig().min_grasp_height["skeleton"]
+    floor = HandPlannerConfig.for_hand(load_spec("skeleton")).min_grasp_height
     low_bar, low_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.03)
     handle, _, low = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door")
     assert handle.centre[2] < floor - 0.015
@@ -209,5 +221,5 @@ def test_the_skeleton_grasps_no_lower_than_its_floor_clearance():
     mid_bar, mid_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.08)
     handle, _, mid = _choose("skeleton", [mid_bar, *mid_posts], mid_bar, "door", kind="door")
     assert mid.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > floor
-    _, _, off = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door", min_grasp_height={})
+    _, _, off = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door", min_grasp_height=None)
     assert off.pos[2] < floor - 0.015

@@ -62,9 +62,8 @@ def test_oracle_opens(planner_cabinets, hand, which):
 
 def test_estimate_handle_from_box_and_depth():
     """A synthetic depth image: a bar 4 cm in front of a wall is located within a few millimetres."""
-    from opend_mj.policy.perception import estimate_handle
-    from opend_mj.policy.planner import PlannerConfig
     from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.perception import PerceptionConfig, estimate_handle
 
     view = _forward_view()
     depth = np.full((256, 256), 1.0)
@@ -74,7 +73,7 @@ def test_estimate_handle_from_box_and_depth():
     u0, u1 = sorted((ua, ub))
     v0, v1 = va - 2, va + 2
     depth[int(v0):int(np.ceil(v1)), int(u0):int(np.ceil(u1))] = 0.946
-    est = estimate_handle(HandleBox(u0, v0, u1, v1), depth, view, PlannerConfig())
+    est = estimate_handle(HandleBox(u0, v0, u1, v1), depth, view, PerceptionConfig())
     assert est.orientation == "horizontal" and est.kind == "bar"
     assert np.allclose(est.centre, centre, atol=0.006), est.centre
 
@@ -83,27 +82,26 @@ def test_a_box_holding_only_the_bar_reads_the_panel_around_it():
     """A box snapped to the handle in depth holds only the bar's pixels, all standing out of the
     panel: the panel is read from the depth just around the box (the hinge of a door is placed on
     it), not from the box's far depths (the bar's). A box that shows the panel keeps its own."""
-    from opend_mj.policy.perception import estimate_handle
-    from opend_mj.policy.planner import PlannerConfig
     from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.perception import PerceptionConfig, estimate_handle
 
     view = _forward_view()
     depth = np.full((256, 256), 1.0)  # the panel 1 m ahead
     depth[120:124, 100:140] = 0.97  # the bar's top face, seen from the camera, 3 cm proud
     depth[124:127, 100:140] = 0.96  # its front, 4 cm proud
-    tight = estimate_handle(HandleBox(100, 120, 140, 127), depth, view, PlannerConfig())
+    tight = estimate_handle(HandleBox(100, 120, 140, 127), depth, view, PerceptionConfig())
     assert tight.front_x == pytest.approx(0.96, abs=0.002)
     assert tight.panel_x == pytest.approx(1.0, abs=0.005), tight.panel_x  # was the bar's 0.97
-    loose = estimate_handle(HandleBox(96, 114, 144, 133), depth, view, PlannerConfig())
+    loose = estimate_handle(HandleBox(96, 114, 144, 133), depth, view, PerceptionConfig())
     assert loose.panel_x == pytest.approx(1.0, abs=0.005)
 
 
 def test_a_door_pulled_past_its_stop_is_not_dragged_back():
     """Without a hinge, the pull direction follows the handle. Once it has turned, a direction that
-    swings back by ``door_turn_back`` degrees is not taken: a door opens one way, and at its stop the
+    swings back by ``turn_back_deg`` degrees is not taken: a door opens one way, and at its stop the
     hand is pushed aside (taken, the hand's yaw followed the direction round and dragged the door
     shut)."""
-    from opend_mj.policy.planner import Planner, PlannerConfig, PullState
+    from opend_mj.policy.planner import DoorConfig, Planner, PlannerConfig, PullState
     from opend_mj.policy.solvers import get_solver
     from opend_mj.sim.hands import load_spec
 
@@ -115,7 +113,7 @@ def test_a_door_pulled_past_its_stop_is_not_dragged_back():
     assert planner._turned_back(state, 40.0)
     state.peak_turn = 20.0  # not turned enough yet: the direction is still settling
     assert not planner._turned_back(state, -15.0)
-    off = Planner(planner.solver, planner.spec, PlannerConfig(door_turn_back=None))
+    off = Planner(planner.solver, planner.spec, PlannerConfig(door=DoorConfig(turn_back_deg=None)))
     state.peak_turn = -108.0
     assert not off._turned_back(state, 40.0)
 
@@ -207,7 +205,7 @@ def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
     from opend_mj.sim.hands import load_spec
 
     planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), PlannerConfig())
-    planner._hinge = np.array([0.0, -0.5])  # hinge on the right (-y), handle 0.4 m from it
+    planner.state.hinge = np.array([0.0, -0.5])  # hinge on the right (-y), handle 0.4 m from it
     state = PullState(quat0=np.array([1.0, 0, 0, 0]))
     result = PlanResult(stage_reached="pull", failed_stage=None)
     planner._start_hinge_pull(state, np.array([-0.03, -0.1, 0.5]), result)
@@ -220,7 +218,7 @@ def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
         t, ang = planner._hinge_tangent(state, site)
         assert abs(ang) == pytest.approx(30.0, abs=1.0)
         assert t[0] < 0 and t[1] < 0  # away from the cabinet and toward the hinge side
-        assert abs(float(t[:2] @ (site[:2] - planner._hinge))) < 1e-6  # tangent to the circle
+        assert abs(float(t[:2] @ (site[:2] - planner.state.hinge))) < 1e-6  # tangent to the circle
 
 
 @pytest.mark.slow
@@ -230,7 +228,7 @@ def test_regrasp_after_a_deliberate_miss_opens_the_drawer(planner_cabinets):
     from opend_mj.evaluation.runner import run_episode
 
     rec = run_episode(_job(planner_cabinets, DRAWER, "allegro",
-                           planner_overrides=(("first_grasp_offset", (0.0, 0.0, 0.06)),)))
+                           planner_overrides=(("approach.first_grasp_offset", (0.0, 0.0, 0.06)),)))
     assert "error" not in rec, rec.get("error")
     assert rec["regrasps"] >= 1
     assert rec["verify"][0]["held"] is False and any(v["held"] for v in rec["verify"][1:])
@@ -364,13 +362,13 @@ def test_a_part_left_ajar_is_no_motion_of_the_next_front():
     ajar = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.07)  # after the push back
     planner = Planner(solver=None, spec=None, config=PlannerConfig())
     first = Observation(rgb=np.zeros((256, 256, 3), np.uint8), depth=closed, instruction="door", camera_view=view)
-    planner._first = first
-    planner._pulled_handle = SimpleNamespace(centre=np.array([0.97, 0.25, 0.0]), panel_x=1.0)
+    planner.state.first = first
+    planner.state.handle = SimpleNamespace(centre=np.array([0.97, 0.25, 0.0]), panel_x=1.0)
     robot = SimpleNamespace(look=lambda: ajar)  # the next handle has not moved its front (yet)
     site = np.array([0.85, 0.25, 0.0])
     assert planner.kind_from_front(planner.front_seen(robot, site)) == "drawer"  # against the first image
     planner._look_again(robot, first)
-    assert planner._first.rgb is first.rgb and planner._first.depth is ajar
+    assert planner.state.first.rgb is first.rgb and planner.state.first.depth is ajar
     assert planner.front_seen(robot, site) is None  # nothing moved since the push back
 
 

@@ -72,7 +72,9 @@ class EpisodeJob:
     pull: str = "arc"
     video_dir: str | None = None
     room: int | None = None
-    planner_overrides: tuple = ()  # ((field, value), ...) for grasp search / experiments
+    #: ((field, value), ...) for grasp search / experiments: ``PlannerConfig.override`` keys
+    #: ("pull", "grasp.close_scale", ...)
+    planner_overrides: tuple = ()
     use_grasp_file: bool = True
     #: From the manifest, so that even an episode that could not run is scored in its column.
     target_type: str | None = None

@@ -29,7 +29,7 @@ def search_grasp(hand: str, cabinets_dir: Path, n_cabinets: int = 3, scales=(0.8
     trials = []
     with tempfile.TemporaryDirectory() as tmp:
         for k, (s, d) in enumerate(grid):
-            jobs = [replace(j, planner_overrides=(("close_scale", s), ("grasp_depth", {"bar": d, "knob": d})),
+            jobs = [replace(j, planner_overrides=(("grasp.close_scale", s), ("grasp.depth", {"bar": d, "knob": d})),
                             use_grasp_file=False, seed=k) for j in base]
             out = Path(tmp) / f"trial_{k}.jsonl"
             run_jobs(jobs, out, workers=workers, progress=False)

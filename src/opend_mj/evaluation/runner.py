@@ -218,13 +218,13 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
 
     robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: cam.render()[1])
     overrides = dict(job.planner_overrides)
-    pconfig = replace(PlannerConfig(pull=job.pull))
+    pconfig = PlannerConfig(pull=job.pull)
     grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
     if grasp is not None:
         pconfig = grasp.apply(pconfig)
     if overrides:
-        pconfig = replace(pconfig, **overrides)
-        grasp = None if "close_scale" in overrides or "grasp_depth" in overrides else grasp
+        pconfig = pconfig.override(overrides)
+        grasp = None if "grasp.close_scale" in overrides or "grasp.depth" in overrides else grasp
     planner = Planner(solver, load_spec(job.hand), pconfig, grasp=None, on_stage=on_stage)
     if grasp is not None:
         planner.grasp = grasp  # knob orientation

@@ -1,0 +1,142 @@
+"""Per-hand planner files beside each hand's model in ``hands/<name>/``.
+
+* ``grasp.json`` (:class:`GraspProfile`, written by ``opend search-grasp``): how far the fingers
+  close, how deep the grasp goes, how a knob is grasped.
+* ``planner.json`` (:class:`HandPlannerConfig`): the numbers of the planner that differ from hand
+  to hand (a low handle's lift and pitch, the lowest grasp site, when a bar is pinched, how many
+  fingers make a hold, when a gripper's grip is lost).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from opend_mj.sim.hands import HANDS_DIR
+
+GRASP_FILE = "grasp.json"
+PLANNER_FILE = "planner.json"
+
+
+@dataclass
+class GraspProfile:
+    """A hand's grasp tuning (``hands/<name>/grasp.json``, written by ``opend search-grasp``).
+
+    ``close_scale``: how far the fingers close, as a fraction of the way from the pre-grasp to the
+    spec's grasp profile; ``grasp_depth``: metres beyond the handle's estimated centre along the
+    approach axis, per handle kind ("bar", "knob"); ``knob_orientation``: the finger orientation
+    for knobs ("horizontal" | "vertical"); ``search``: the settings the search tried."""
+
+    hand: str
+    close_scale: float = 1.0
+    grasp_depth: dict = field(default_factory=lambda: {"bar": 0.0, "knob": 0.0})
+    knob_orientation: str = "horizontal"
+    search: list = field(default_factory=list)
+
+    @classmethod
+    def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
+        return Path(hands_dir or HANDS_DIR) / hand / GRASP_FILE
+
+    @classmethod
+    def load(cls, hand: str, hands_dir: Path | None = None) -> "GraspProfile | None":
+        path = cls.path_for(hand, hands_dir)
+        if not path.is_file():
+            return None
+        data = json.loads(path.read_text())
+        names = set(cls.__dataclass_fields__)
+        return cls(**{k: v for k, v in data.items() if k in names})
+
+    def save(self, hands_dir: Path | None = None) -> Path:
+        path = self.path_for(self.hand, hands_dir)
+        path.write_text(json.dumps(asdict(self), indent=2) + "\n")
+        return path
+
+    def apply(self, config):
+        """``config`` (a :class:`~opend_mj.policy.planner.PlannerConfig`) with this profile's
+        finger closing and grasp depth."""
+        return config.override({"grasp.close_scale": self.close_scale, "grasp.depth": dict(self.grasp_depth)})
+
+
+@dataclass(frozen=True)
+class HandPlannerConfig:
+    """The planner's numbers for one hand (``hands/<name>/planner.json``).
+
+    ``low_handle_lift`` (m): for a handle lower than ``GraspConfig.low_handle_height``, the grasp
+    site goes this much above the handle's centre, so that open fingers pointing down clear the
+    floor on the way in and close over the bar from above. ``min_grasp_height`` (m above the
+    floor, or None): the lowest grasp site (fingers that point down behind a bar strike the floor
+    below it). ``low_handle_pitch`` (deg): a low horizontal bar is approached pitched down by this
+    much, from above and in front (a body wide along the finger axis clears the floor below and the
+    door behind). ``pinch_gap`` (m): a bar whose stand-off gap is below this is pinched rather than
+    hooked. ``hold_parts``: the hand holds when at least this many of its parts (fingers, the
+    thumb; not the palm) press on something. ``grip_lost_change`` (the finger joints' unit: m for
+    a gripper's slides, or None): the grip is lost, and the pull stops, when a finger joint moved
+    this much from where it closed on the handle (only for fingers that do not move while they
+    hold)."""
+
+    low_handle_lift: float = 0.0
+    min_grasp_height: float | None = None
+    low_handle_pitch: float = 0.0
+    pinch_gap: float = 0.0
+    hold_parts: int = 1
+    grip_lost_change: float | None = None
+
+    @classmethod
+    def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
+        return Path(hands_dir or HANDS_DIR) / hand / PLANNER_FILE
+
+    @classmethod
+    def for_type(cls, hand_type: str) -> "HandPlannerConfig":
+        """The numbers for a hand without a ``planner.json``, by its type."""
+        return HAND_TYPE_DEFAULTS.get(hand_type, cls())
+
+    @classmethod
+    def load(cls, path: Path) -> "HandPlannerConfig":
+        """Read ``path``; a clear error naming the file for unknown fields or wrong types."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path}: cannot read the hand's planner numbers: {exc}") from exc
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: expected a JSON object of planner numbers")
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        values = {}
+        for key, value in data.items():
+            if key.startswith("_"):  # "_doc" and the like: notes for people
+                continue
+            if key not in fields:
+                raise ValueError(f"{path}: unknown field {key!r} (known: {', '.join(fields)})")
+            optional = key in ("min_grasp_height", "grip_lost_change")
+            if value is None and optional:
+                values[key] = None
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{path}: {key!r} must be a number{' or null' if optional else ''}, got {value!r}")
+            if key == "hold_parts" and not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"{path}: 'hold_parts' must be a whole number of at least 1, got {value!r}")
+            values[key] = int(value) if key == "hold_parts" else float(value)
+        return cls(**values)
+
+    @classmethod
+    def for_hand(cls, spec, hands_dir: Path | None = None) -> "HandPlannerConfig":
+        """``hands/<spec.name>/planner.json`` where there is one, else the defaults of the hand's type
+        (None ``spec``: the defaults)."""
+        if spec is None:
+            return cls()
+        path = cls.path_for(spec.name, hands_dir)
+        return cls.load(path) if path.is_file() else cls.for_type(spec.hand_type)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+#: A hand without a ``planner.json``: a dexterous hand pinches a bar closer than 12 mm to its
+#: panel (its fingers cannot get behind it) and holds with one part; a parallel gripper closes
+#: across every bar, holds with both fingers, and has lost its grip when a finger moved 12 mm.
+HAND_TYPE_DEFAULTS = {
+    "dexterous": HandPlannerConfig(pinch_gap=0.012, hold_parts=1),
+    "parallel_gripper": HandPlannerConfig(pinch_gap=0.0, hold_parts=2, grip_lost_change=0.012),
+}

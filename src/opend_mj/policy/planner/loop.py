@@ -1,0 +1,225 @@
+"""The stage loop: locate -> perceive -> choose a grasp -> approach -> close and verify -> pull,
+re-grasping where the grip is lost, pushing a lost door open, giving up a handle of the other kind.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from opend_mj.language import target_kind
+from opend_mj.policy.handle import HandleSolver, centres_overlap
+from opend_mj.policy.perception import (
+    estimate_handle,
+    measure_handle,
+    one_of_paired_handles,
+    refine_box_with_depth,
+    snaps_to_depth,
+)
+from opend_mj.policy.planner.approach import ApproachAndClose
+from opend_mj.policy.planner.config import PlannerConfig
+from opend_mj.policy.planner.grasp import GraspGeometry
+from opend_mj.policy.planner.hand import GraspProfile, HandPlannerConfig
+from opend_mj.policy.planner.kind import KindCheck
+from opend_mj.policy.planner.moves import hold, move
+from opend_mj.policy.planner.pull import Pulling
+from opend_mj.policy.planner.records import EpisodeState, Observation, PlanResult, PullState
+from opend_mj.policy.planner.recovery import PushRecovery
+from opend_mj.policy.planner.robot import new_depth
+from opend_mj.sim.hands import HandSpec
+from opend_mj.transforms import quat_axis_z
+
+#: After a finished pull with ``release``: the fingers stay closed, then open, for these times
+#: (s), and the hand backs off this far (m) along its approach axis.
+RELEASE_HOLD = 0.2
+RELEASE_OPEN = 0.4
+RELEASE_BACKOFF = 0.08
+#: A grip never held beyond this much pull travel (m) is the grasp's failure, not the pull's.
+GRASP_FAILED_TRAVEL = 0.03
+
+
+class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery):
+    """Deterministic open-the-handle controller around a handle solver.
+
+    Stages: :meth:`locate` (solver box -> 3D handle), :meth:`perceive` (shape from depth),
+    :meth:`choose_grasp`, :meth:`approach`, :meth:`close_and_verify` (touch: does the hand hold?),
+    :meth:`pull` (until done or the grip slips); where the grip is lost, :meth:`back_off` and
+    :meth:`next_grasp`; a door that started to open and was lost is pushed open from inside
+    (:meth:`recover_door`). With a learned solver, a handle whose pull shows the other kind than
+    the instruction's is taken back, let go, and the solver asked again with what was seen
+    (:meth:`judge_kind`, :meth:`push_back`).
+
+    ``hand``: the hand's planner numbers (default: ``hands/<spec.name>/planner.json``);
+    ``grasp``: the hand's grasp profile (``grasp.json``: finger closing, grasp depth, knobs)."""
+
+    def __init__(self, solver: HandleSolver, spec: HandSpec, config: PlannerConfig = PlannerConfig(),
+                 grasp: GraspProfile | None = None, on_stage: Callable[[str, dict], None] | None = None,
+                 hand: HandPlannerConfig | None = None):
+        self.solver = solver
+        self.spec = spec
+        self.grasp = grasp
+        self.config = grasp.apply(config) if grasp is not None else config
+        self.hand = hand if hand is not None else HandPlannerConfig.for_hand(spec)
+        self.on_stage = on_stage
+        self.state = EpisodeState()
+
+    # ---------------------------------------------------------------- helpers
+    def _stage(self, result: PlanResult, name: str, **info) -> None:
+        result.stage_reached = name
+        result.events.append({"stage": name, **{k: v for k, v in info.items() if not isinstance(v, np.ndarray)}})
+        if self.on_stage is not None:
+            self.on_stage(name, info)
+
+    def _time_left(self, robot) -> float:
+        return self.config.max_time - robot.time
+
+    def _hold_until_min_time(self, robot, pose) -> None:
+        """Keep ``pose`` (site position, orientation, fingers; None: where the hand is, open) until
+        the episode lasted ``min_time``."""
+        if pose is None:
+            pos, quat = robot.site_pose()
+            fingers = self.spec.open_pose
+        else:
+            pos, quat, fingers = pose
+        while robot.time < self.config.min_time - 1e-9:
+            robot.step(pos, quat, fingers)
+
+    # ---------------------------------------------------------------- the episode
+    def run(self, robot, obs: Observation) -> PlanResult:
+        """One episode from its one observation: open the handle the instruction names."""
+        cfg = self.config
+        result = PlanResult(stage_reached="locate", failed_stage=None)
+        result.target_kind = target_kind(obs.instruction)
+        self.state = EpisodeState(first=obs)  # the image a pulled front's motion is measured against
+        observed: tuple = ()
+        handle, box = self.locate(robot, obs, result)
+        if handle is None:
+            result.failed_stage = "locate"
+            self._hold_until_min_time(robot, None)
+            return result
+        while True:
+            status, state, grasp = self.open_handle(robot, obs, handle, box, result)
+            if status != "wrong_kind":
+                break
+            # the handle moved as the other kind: push it back, let go, ask the solver again
+            seen = state.seen_kind
+            observed = observed + ((box.as_tuple(), seen),)
+            result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
+                                      "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
+            self.push_back(robot, grasp, state)
+            if len(observed) >= cfg.kind.max_target_tries or self._time_left(robot) < cfg.kind.retarget_time:
+                status = "not_held"
+                break
+            new_handle, new_box = self.locate(robot, obs, result, observed)
+            if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
+                status = "not_held"
+                break
+            self._look_again(robot, obs)  # only where another handle is pulled
+            handle, box = new_handle, new_box
+        result.pulled = state.travelled
+        result.turned_deg = state.turned
+        result.grasp_style = grasp.style
+        self._finish(robot, status, grasp, result)
+        return result
+
+    def _finish(self, robot, status: str, grasp, result: PlanResult) -> None:
+        """Hold (closed where the pull finished, else open; released where ``release``) until
+        ``min_time``, then the planner's own verdict."""
+        site, squat = robot.site_pose()
+        fingers = grasp.closed if status == "done" else self.spec.pregrasp_profile(grasp.orientation)
+        if self.config.release and status == "done":
+            pre = self.spec.pregrasp_profile(grasp.orientation)
+            hold(robot, site, squat, grasp.closed, RELEASE_HOLD)
+            hold(robot, site, squat, pre, RELEASE_OPEN)
+            move(robot, site, site - RELEASE_BACKOFF * quat_axis_z(squat), squat, pre,
+                 self.config.approach.approach_speed)
+            fingers = pre
+        self._hold_until_min_time(robot, (robot.site_pose()[0], robot.site_pose()[1], fingers))
+        self._stage(result, "check", pulled=round(result.pulled, 4), turned_deg=round(result.turned_deg, 2),
+                    regrasps=result.regrasps)
+        if status == "not_held" and result.pulled < GRASP_FAILED_TRAVEL and not result.pushed:
+            result.failed_stage = "grasp"
+        elif status != "done" and not result.pushed:
+            result.failed_stage = "pull"
+
+    def _look_again(self, robot, obs: Observation) -> None:
+        """A new image for the next pulled front's motion to be measured against: a wrong handle
+        pushed back may leave its part ajar (a drawer a few cm out), which the first image would
+        show as the next front's motion. The solver keeps reading the first image."""
+        depth = new_depth(robot)
+        if depth is not None:
+            self.state.first = replace(obs, depth=depth)
+
+    def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult):
+        """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
+        pull state, last grasp); status "done", "slipped", "not_held" or "wrong_kind" (its motion
+        showed the other kind than the instruction's)."""
+        cfg = self.config
+        self.state.handle = handle
+        shape = self.perceive(handle, box, obs, result)
+        grasp = self.choose_grasp(handle, shape, obs, result)
+        door = result.target_kind == "door" and cfg.pull == "arc"
+        state = PullState(quat0=grasp.quat)
+        status = "not_held"
+        for attempt in range(cfg.recovery.max_grasp_tries):
+            if attempt > 0 and self._time_left(robot) < cfg.recovery.attempt_time:
+                break
+            grasp.attempt = attempt
+            if attempt > 0:
+                result.regrasps += 1
+            self.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind)
+            if not self.close_and_verify(robot, grasp, result):
+                status = "not_held"
+                self.back_off(robot, grasp)
+                grasp = self.next_grasp(grasp, handle, shape, state, result)
+                continue
+            status = self.pull(robot, grasp, door, state, result)
+            if status == "wrong_kind":
+                return status, state, grasp
+            if status == "slipped" and (abs(state.turned) >= cfg.pulling.door_done_deg if door
+                                        else state.travelled >= cfg.pulling.drawer_done):
+                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
+            if status == "done":
+                break
+            if door and cfg.recovery.push_recovery:
+                arc = self.door_arc(state)
+                if arc is not None and math.degrees(arc[4]) >= cfg.recovery.push_min_turn:
+                    self.back_off(robot, grasp)
+                    break  # an opened door is pushed open from inside (below), not grasped again
+            self.back_off(robot, grasp)
+            grasp = self.next_grasp(grasp, handle, shape, state, result)
+        if door and status != "done" and cfg.recovery.push_recovery:
+            self.recover_door(robot, state, result)
+        return status, state, grasp
+
+    def locate(self, robot, obs: Observation, result: PlanResult, observed: tuple = ()):
+        """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle;
+        ``observed``: (box, kind) of handles whose motion showed their kind (a solver that takes them)."""
+        cfg = self.config
+        self._stage(result, "locate")
+        if observed:
+            box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view, observed=observed)
+        else:
+            box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
+        if cfg.locate.refine_with_depth and snaps_to_depth(self.solver, box):
+            result.events.append({"solver_box": box.to_dict()})
+            box = refine_box_with_depth(box, obs.depth, obs.camera_view, cfg.perception)
+        if box is not None and cfg.locate.one_of_paired_handles:
+            single = one_of_paired_handles(box, obs.depth, cfg.perception)
+            if single is not None:  # a pair of pulls under one box: take the nearer one
+                result.events.append({"paired_handles_box": box.to_dict()})
+                box = single
+        result.box = box.to_dict() if box is not None else None
+        handle = estimate_handle(box, obs.depth, obs.camera_view, cfg.perception) if box is not None else None
+        if handle is not None:
+            result.handle = handle.to_dict()
+        return handle, box
+
+    def perceive(self, handle, box, obs: Observation, result: PlanResult):
+        """Thickness, length, stand-off gap and free space around the handle, measured in depth."""
+        shape = measure_handle(handle, box, obs.depth, obs.camera_view, self.config.perception)
+        result.shape = shape.to_dict()
+        return shape

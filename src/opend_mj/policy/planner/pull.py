@@ -1,0 +1,250 @@
+"""The pull: drawers straight back along -x, doors along their handle's circle.
+
+Each control step the target is placed along the pull direction, never more than ``lead`` ahead
+of where the grasp site actually is, and the lateral error is dropped, so that the handle leads
+and the hand follows it compliantly. A drawer moves straight and its direction stays -x. A door's
+handle moves on a circle: about the hinge seen in depth where there is one (the pull direction is
+the circle's opening tangent at the site), else along the site's observed motion (low-pass
+filtered, never back into the cabinet, never turning back once the door turned). The hand's yaw
+turns with the direction so that the grip does not twist.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
+from opend_mj.transforms import turn_about_z
+
+#: Seconds a pull may last beyond the time its remaining travel needs at the pull speed.
+PULL_SLACK_TIME = 3.0
+
+
+@dataclass
+class PullRun:
+    """The running state of one pull (one grasp's), beside the :class:`PullState` kept across
+    re-grasps."""
+
+    door: bool
+    start: np.ndarray  # site position when the pull began (m)
+    target: np.ndarray  # the site target (m)
+    quat: np.ndarray  # the site orientation target
+    grip: np.ndarray  # finger joints as they closed on the handle
+    start_travel: float  # state.travelled when the pull began (m)
+    history: list = field(default_factory=list)  # site positions, one per control step
+    quiet: int = 0  # control steps since the hand last touched anything
+    last_touch: np.ndarray | None = None  # site position when the hand last touched
+    held_path: float = 0.0  # length (m) of the held path so far (the kind is judged once long enough)
+    watch_kind: bool = True  # the kind is judged once per pull
+    least_x: float = 0.0  # the site's smallest x so far (m)
+
+
+class Pulling:
+    """The pull stage of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
+    ``hand``, ``state``, :meth:`holding`, :meth:`judge_kind`, :meth:`_stage`, :meth:`_time_left`)."""
+
+    def pull(self, robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
+        """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
+        the hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did),
+        or the held handle showed the other kind than the instruction's ("wrong_kind")."""
+        cfg = self.config.pulling
+        self._stage(result, "pull", attempt=g.attempt)
+        dt = robot.control_dt
+        start = robot.site_pos()
+        run = PullRun(door=door, start=start, target=start.copy(), quat=g.quat, grip=robot.finger_qpos(),
+                      start_travel=state.travelled, history=[start.copy()], least_x=float(start[0]))
+        travel_max = cfg.door_travel if door else cfg.drawer_travel
+        stall_n = max(2, int(round(cfg.stall_time / dt)))
+        max_steps = int(round((max(0.0, travel_max - state.travelled) / cfg.speed + PULL_SLACK_TIME) / dt))
+        state.pull_start = len(state.track)
+        if door:
+            self._start_hinge_pull(state, start, result)
+        for k in range(max_steps):
+            if self._time_left(robot) <= 0.0:
+                return "done"
+            site = robot.site_pos()
+            status = self._grip_check(robot, site, run, state, result)
+            if status is not None:
+                return status
+            run.history.append(site.copy())
+            if door:
+                self._steer_door(site, run, state, result)
+            self._advance(robot, site, run, g, state, dt)
+            status = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
+            if status is not None:
+                return status
+        return "done"
+
+    # ---------------------------------------------------------------- one control step
+    def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> str | None:
+        """"slipped" where the grip is lost (the fingers forced open, or no touch for a while and the
+        hand moved away), "wrong_kind" where the held path shows the other kind, else None; records
+        the held track."""
+        cfg = self.config
+        tolerance = self.hand.grip_lost_change
+        if tolerance is not None and float(np.max(np.abs(robot.finger_qpos() - run.grip))) > tolerance:
+            # the handle forced the fingers open: the grip is lost
+            result.events.append({"grip_lost_at": round(state.travelled, 4)})
+            return "slipped"
+        if not cfg.verify.verify_grasp:
+            return None
+        held, touch = self.holding(robot)
+        touching = held or any(v > cfg.verify.touch_min for v in touch.values())
+        run.quiet = run.quiet + 1 if not touching else 0
+        if touching or run.last_touch is None:
+            run.last_touch = site.copy()
+        away = float(np.linalg.norm(site - run.last_touch))
+        slip_n = max(2, int(round(cfg.pulling.slip_time / robot.control_dt)))
+        if run.quiet >= slip_n and away >= cfg.pulling.slip_distance and (run.door or cfg.pulling.drawer_slips):
+            result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
+            return "slipped"
+        if held:
+            state.last_held = (site.copy(), run.quat.copy())
+            if len(state.track) > state.pull_start:
+                run.held_path += float(np.linalg.norm(site - state.track[-1]))
+            state.track.append(site.copy())
+            if run.watch_kind and run.held_path >= cfg.kind.check_distance - 1e-9:
+                verdict = self.judge_kind(robot, site, state, result)
+                if verdict is not None:
+                    run.watch_kind = False
+                    if verdict:
+                        return "wrong_kind"
+        return None
+
+    def _steer_door(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
+        """A door's pull direction and the hand's yaw: from the observed motion (no hinge), or the
+        circle about the hinge seen in depth."""
+        cfg = self.config.door
+        if len(run.history) > cfg.direction_window:
+            self._follow_motion(site, run, state, result)
+        if state.hinge is not None:
+            tangent, ang = self._hinge_tangent(state, site)
+            if abs(ang) <= cfg.max_turn_deg:
+                state.direction = tangent
+                state.turned = ang
+                state.opened = max(state.opened, abs(ang))
+                run.quat = self._yawed(state, ang)
+
+    def _follow_motion(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
+        """Turn the pull direction toward the site's motion over the last ``direction_window``
+        steps (low-passed); drop a hinge that the motion contradicts."""
+        cfg = self.config.door
+        motion = run.history[-1] - run.history[-1 - cfg.direction_window]
+        motion[2] = 0.0
+        norm = float(np.linalg.norm(motion))
+        if norm <= cfg.direction_min_motion:
+            return
+        new = state.direction + cfg.direction_gain * (motion / norm - state.direction)
+        new[2] = 0.0
+        cand = new / np.linalg.norm(new)
+        if cand[0] > cfg.max_pull_toward_cabinet:  # never pull back into the cabinet
+            cand[0] = cfg.max_pull_toward_cabinet
+            lateral = math.sqrt(max(1e-9, 1 - cand[0] ** 2))
+            cand[1] = math.copysign(lateral, cand[1] if abs(cand[1]) > 1e-9 else 1.0)
+            cand = cand / np.linalg.norm(cand)
+        base_dir = state.base_dir
+        ang = math.degrees(math.atan2(base_dir[0] * cand[1] - base_dir[1] * cand[0], float(base_dir @ cand)))
+        if state.hinge is not None and state.sense * ang < -cfg.hinge_disagree_deg / 4 \
+                and float(np.linalg.norm(site - run.start)) > cfg.hinge_check_distance:
+            # the handle turns the other way round: the hinge seen in depth is wrong
+            result.events.append({"hinge_pull_dropped": round(ang, 1)})
+            state.hinge = None
+        back = state.hinge is None and self._turned_back(state, ang)
+        if back and not state.held_back:
+            state.held_back = True
+            result.events.append({"door_turn_held": round(ang, 1), "from": round(state.peak_turn, 1)})
+        if state.hinge is None and abs(ang) <= cfg.max_turn_deg and not back:
+            state.direction = cand
+            state.turned = ang
+            state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
+            run.quat = self._yawed(state, ang)
+
+    def _yawed(self, state: PullState, ang: float) -> np.ndarray:
+        """The site orientation for a pull direction turned ``ang`` (deg): the grasp's, turned about z."""
+        cfg = self.config.door
+        yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
+        return turn_about_z(state.quat0, math.radians(yaw))
+
+    def _advance(self, robot, site, run: PullRun, g: GraspChoice, state: PullState, dt: float) -> None:
+        """Move the target along the pull direction (biased for doors), at most ``lead`` ahead of
+        the site and without lateral error; one control step; count the travel."""
+        cfg = self.config
+        direction = state.direction
+        pull_dir = direction
+        if run.door and abs(state.turned) > cfg.door.bias_after_deg and cfg.door.pull_bias_deg:
+            b = math.radians(math.copysign(cfg.door.pull_bias_deg, state.turned))
+            c, sn = math.cos(b), math.sin(b)
+            pull_dir = np.array([c * direction[0] - sn * direction[1], sn * direction[0] + c * direction[1], 0.0])
+        target = run.target + pull_dir * cfg.pulling.speed * dt
+        ahead = float((target - site) @ pull_dir)
+        if ahead > cfg.pulling.lead:
+            target = target - pull_dir * (ahead - cfg.pulling.lead)
+        lateral = (target - site) - pull_dir * float((target - site) @ pull_dir)
+        run.target = target - lateral
+        robot.step(run.target, run.quat, g.closed)
+        if run.door:
+            state.travelled += float(np.linalg.norm(run.history[-1] - run.history[-2]))
+        else:
+            state.travelled = max(state.travelled, run.start_travel + float(np.linalg.norm(site - run.start)))
+
+    def _pull_finished(self, robot, k: int, run: PullRun, state: PullState, result: PlanResult,
+                       travel_max: float, stall_n: int) -> str | None:
+        """"done" once the travel is done, a door swings back toward the cabinet (at its stop), or
+        the site stalls; else None."""
+        cfg = self.config
+        if state.travelled >= travel_max:
+            return "done"
+        site = run.history[-1]
+        if run.door and cfg.door.back_stop is not None:
+            run.least_x = min(run.least_x, float(site[0]))
+            if float(site[0]) - run.least_x > cfg.door.back_stop:
+                # the handle swings back toward the cabinet: the door is at its stop (or beyond
+                # 90 degrees); pulling on would drag it shut
+                result.events.append({"door_back_stop": round(state.turned, 1)})
+                return "done"
+        if k > stall_n and float(np.linalg.norm(run.history[-1] - run.history[-1 - stall_n])) \
+                < cfg.pulling.stall_distance:
+            return "done"
+        return None
+
+    # ---------------------------------------------------------------- the door's circle
+    def _turned_back(self, state: PullState, ang: float) -> bool:
+        """Whether a pull direction turned ``ang`` (deg) comes back ``turn_back_deg`` or more from
+        a farthest turn of at least ``turn_back_after_deg`` (such a direction is not taken)."""
+        cfg = self.config.door
+        peak = state.peak_turn
+        if cfg.turn_back_deg is None or abs(peak) < cfg.turn_back_after_deg:
+            return False
+        return math.copysign(1.0, peak) * (peak - ang) >= cfg.turn_back_deg
+
+    def _start_hinge_pull(self, state: PullState, site: np.ndarray, result: PlanResult) -> None:
+        """Pull a door along the circle about the hinge seen in depth (kept across re-grasps)."""
+        cfg = self.config.door
+        seen = self.state.hinge
+        if not cfg.hinge_pull or seen is None or state.sense != 0.0:
+            return
+        r = site[:2] - np.asarray(seen, float)
+        radius = float(np.linalg.norm(r))
+        if not (cfg.hinge_radius_range[0] <= radius <= cfg.hinge_radius_range[1]):
+            return
+        t = np.array([-r[1], r[0]]) / radius
+        if abs(t[0]) < 0.5:  # the handle is not beside its hinge in the door's plane (> 60 deg off)
+            return
+        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
+        state.hinge = np.asarray(seen, float)
+        state.angle0 = math.atan2(r[1], r[0])
+        result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
+
+    def _hinge_tangent(self, state: PullState, site: np.ndarray) -> tuple[np.ndarray, float]:
+        """The opening tangent of the circle about the hinge through the site, and the door's angle
+        (deg, signed like the turn of the pull direction from -x)."""
+        r = site[:2] - state.hinge
+        norm = max(1e-6, float(np.linalg.norm(r)))
+        t = state.sense * np.array([-r[1], r[0]]) / norm
+        tangent = np.array([t[0], t[1], 0.0])
+        base = state.base_dir
+        ang = math.degrees(math.atan2(base[0] * t[1] - base[1] * t[0], float(base[0] * t[0] + base[1] * t[1])))
+        return tangent, ang

@@ -1,0 +1,114 @@
+"""What the planner sees, chooses, keeps and reports: plain records, no behaviour.
+
+Units: metres, radians in quaternions (w, x, y, z), degrees where a name ends in ``_deg`` or says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from opend_mj.transforms import quat_axis_z
+
+#: The stages an episode goes through (``PlanResult.stage_reached``; "check" ends every episode).
+STAGES = ("locate", "approach", "grasp", "pull", "recover")
+
+
+@dataclass
+class Observation:
+    """The one observation the planner gets: an RGB-D image, its camera and the instruction."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    instruction: str
+    camera_view: object  # CameraView: intrinsics and pose
+
+
+@dataclass
+class PlanResult:
+    """What the planner did and believes (no ground truth in here)."""
+
+    stage_reached: str  # last stage started
+    failed_stage: str | None  # the planner's own verdict (None: it believes it succeeded)
+    box: dict | None = None
+    handle: dict | None = None
+    target_kind: str = ""
+    pulled: float = 0.0  # how far the grasp site travelled while pulling (m)
+    turned_deg: float = 0.0  # how much the pull direction turned (doors)
+    regrasps: int = 0  # grasps tried after the first
+    grasp_style: str = ""
+    shape: dict | None = None  # the handle as measured in depth
+    pushed: bool = False  # a lost door was pushed open from inside
+    #: handles given up because their motion showed the other kind than the instruction's:
+    #: [{"box": [...], "kind": "door" | "drawer", "by": "path" | "front", "turn_deg": ...}, ...]
+    wrong_kind: list = field(default_factory=list)
+    events: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class GraspChoice:
+    """One grasp: the style chosen from the handle's shape, the site pose and the finger targets."""
+
+    style: str  # "hook" (behind a bar with room), "pinch" (a bar close to its panel), "wrap" (a knob)
+    orientation: str  # the handle's: "horizontal" | "vertical"
+    quat: np.ndarray  # grasp-site orientation (world)
+    pos: np.ndarray  # grasp-site position (world, m)
+    pre: np.ndarray  # finger targets, open
+    closed: np.ndarray  # finger targets, closed
+    attempt: int = 0
+
+    @property
+    def axis(self) -> np.ndarray:
+        """The approach direction (site +z)."""
+        return quat_axis_z(self.quat)
+
+    def to_dict(self) -> dict:
+        return {"style": self.style, "orientation": self.orientation, "attempt": self.attempt,
+                "pos": [round(float(x), 4) for x in self.pos]}
+
+
+@dataclass
+class PullState:
+    """What a pull knows and keeps across re-grasps: its direction, turn and the held track."""
+
+    quat0: np.ndarray
+    direction: np.ndarray = field(default_factory=lambda: np.array([-1.0, 0.0, 0.0]))
+    base_dir: np.ndarray = field(default_factory=lambda: np.array([-1.0, 0.0, 0.0]))
+    turned: float = 0.0  # the pull direction's turn from ``base_dir`` (deg, signed)
+    travelled: float = 0.0  # m
+    track: list = field(default_factory=list)  # site positions while the grip held
+    last_held: tuple | None = None  # (site pos, site quat) the last time the grip held
+    #: doors: the hinge (world x, y) the pull turns about, the handle's start angle about it (rad)
+    #: and the sense of opening (+1 / -1); None until a pull starts with a hinge seen in depth
+    hinge: np.ndarray | None = None
+    angle0: float = 0.0
+    sense: float = 0.0
+    opened: float = 0.0  # the largest door angle (deg) reached while the grip held
+    peak_turn: float = 0.0  # the pull direction's farthest turn (deg, signed) without a hinge
+    held_back: bool = False  # a direction turning back from ``peak_turn`` was not taken
+    #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
+    pull_start: int = 0
+    seen_kind: str | None = None
+    seen_by: str = ""  # "path" (the held handle's) or "front" (the camera's)
+    seen_turn: float = 0.0
+
+
+@dataclass
+class EpisodeState:
+    """What the planner keeps about the episode it runs (a fresh one per :meth:`Planner.run`).
+
+    ``first``: the image a pulled front's motion is measured against (the episode's first, or one
+    taken after a wrong handle was pushed back); ``handle``: the 3D handle being opened;
+    ``hinge``: the door's hinge line (world x, y) seen in depth, or None; ``first_pos``: the first
+    grasp's site position (re-grasps with nothing held go near it); ``approach_target``: where the
+    latest approach took the grasp site (the fingers close there)."""
+
+    first: Observation | None = None
+    handle: object | None = None  # HandleEstimate
+    hinge: np.ndarray | None = None
+    first_pos: np.ndarray | None = None
+    approach_target: np.ndarray | None = None
