@@ -155,6 +155,7 @@ def test_list_sources(sources, tmp_path):
         list_sources(tmp_path / "missing")
 
 
+@pytest.mark.slow
 def test_cli_build_assets(tmp_path):
     out = tmp_path / "cabinets"
     result = CliRunner().invoke(main, ["build-assets", "--count", str(N), "--out", str(out), "--workers", "2",
