@@ -25,7 +25,8 @@ def sources(proc_sources) -> list[Path]:
 @pytest.fixture(scope="module")
 def built(sources, tmp_path_factory):
     out = tmp_path_factory.mktemp("dataset")
-    manifest = build_dataset(sources, out, workers=2, progress=False, log=lambda *a: None)
+    # in this process: the process pool is tested by test_cli_build_assets and test_bad_inputs
+    manifest = build_dataset(sources, out, workers=1, progress=False, log=lambda *a: None)
     return out, manifest
 
 
