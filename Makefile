@@ -86,11 +86,12 @@ assets: install
 	$(BIN)/opend build-assets --out $(CABINETS) --workers $(WORKERS) --no-progress
 
 ## The test suite, slow tests included (CI runs them), in TEST_WORKERS pytest-xdist processes (0: one
-## process); --dist loadgroup keeps the tests of one compiled-cabinet fixture, and of one file, in one
-## process (tests/conftest.py). pytest's exit 5, "no tests collected", is a failure too.
+## process); --dist loadfile keeps each file's tests in one process (module fixtures are built once),
+## and the compiled-cabinet fixtures are shared by the processes (tests/conftest.py). pytest's exit 5,
+## "no tests collected", is a failure too.
 TEST_WORKERS ?= 2
 test: install
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup; status=$$?; \
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile; status=$$?; \
 	if [ $$status -eq 5 ]; then echo "no tests were collected"; fi; exit $$status
 
 bench: install

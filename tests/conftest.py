@@ -1,7 +1,9 @@
-"""Shared fixtures: the real PartNet cabinet and a few procedural cabinets, compiled once per session.
+"""Shared fixtures: the real PartNet cabinet, a few procedural cabinets and a small dataset, compiled
+once per test run.
 
-The compile cache (decomposition results) lives in a session tmp dir, so the real cabinet's
-decomposition runs once per test session (per xdist worker) and never touches the user's `cabinets/`.
+They are built in session tmp dirs (never the user's `cabinets/`) that every pytest-xdist process of
+the run shares: the first process to need one builds it under a file lock, the others wait for it and
+reuse it (`make test` runs the suite in 2 processes with ``--dist loadfile``).
 
 Skips: every skip says why. Under CI (the environment variable ``CI`` set), a skip is a failure
 unless its reason says that real data (``../shared``) or an optional extra is missing: a test that
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,24 +50,6 @@ def _fail_unexplained_skip(report) -> None:
                            "optional extra may skip there: make the test build what it needs, or fail")
 
 
-#: Session fixtures that compile cabinets, by the xdist group of the tests that use them.
-_SHARED_FIXTURE_GROUPS = {"real_cabinet": "compiled_cabinets", "any_cabinet": "compiled_cabinets",
-                          "proc_cabinets": "compiled_cabinets", "small_dataset": "small_dataset"}
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config, items):
-    """Group tests for ``pytest -n N --dist loadgroup`` (as `make test` runs): the tests that use one
-    compiled-cabinet session fixture run in one process, so it is built once, not once per process;
-    every other test stays with its file (module fixtures, too, are built once)."""
-    for item in items:
-        if item.get_closest_marker("xdist_group"):
-            continue
-        group = next((g for name, g in _SHARED_FIXTURE_GROUPS.items() if name in item.fixturenames),
-                     item.nodeid.split("::")[0])
-        item.add_marker(pytest.mark.xdist_group(group))
-
-
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     outcome = yield
@@ -85,13 +70,12 @@ N_PROC_CABINETS = 6
 
 @dataclass
 class Compiled:
-    """A compiled cabinet: its folder, cabinet.json and the CompileResult that made it."""
+    """A compiled cabinet: its folder and cabinet.json."""
 
     id: str
     source: Path
     dir: Path
     info: dict
-    result: object
 
     @property
     def xml(self) -> Path:
@@ -103,9 +87,24 @@ class Compiled:
         return load_cabinet(self.dir)
 
 
+@contextmanager
+def shared_dir(tmp_path_factory, name: str):
+    """A tmp dir that every xdist process of this run shares, held under a file lock while in use."""
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # xdist: <run>/popen-gwN
+    path = root / f"shared-{name}"
+    with FileLock(str(path) + ".lock"):
+        path.mkdir(exist_ok=True)
+        yield path
+
+
 @pytest.fixture(scope="session")
 def compile_cache(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("compile_cache")
+    """The compiler's decomposition cache (its files are written atomically, so processes share it)."""
+    with shared_dir(tmp_path_factory, "compile_cache") as path:
+        return path
 
 
 @pytest.fixture(scope="session")
@@ -119,10 +118,10 @@ def real_source() -> Path:
 def real_cabinet(real_source, tmp_path_factory, compile_cache) -> Compiled:
     from opend_mj.assets.compiler import compile_cabinet
 
-    out = tmp_path_factory.mktemp("real_cabinets")
-    result = compile_cabinet(real_source, out, cache_dir=compile_cache)
-    assert result.status == "built", f"{REAL_ID} was not built: {result.reason}: {result.message}"
-    return Compiled(REAL_ID, real_source, out / REAL_ID, result.info, result)
+    with shared_dir(tmp_path_factory, "real_cabinets") as out:  # "cached": another process built it
+        result = compile_cabinet(real_source, out, cache_dir=compile_cache)
+    assert result.status in ("built", "cached"), f"{REAL_ID} was not built: {result.reason}: {result.message}"
+    return Compiled(REAL_ID, real_source, out / REAL_ID, result.info)
 
 
 @pytest.fixture(scope="session")
@@ -137,19 +136,20 @@ def proc_cabinets(proc_sources, tmp_path_factory, compile_cache) -> list[Compile
     """The first few procedural sources that compile, covering drawers and double doors."""
     from opend_mj.assets.compiler import compile_cabinet
 
-    out = tmp_path_factory.mktemp("proc_cabinets")
     chosen: list[Compiled] = []
-    for source in proc_sources:
-        meta = json.loads((source / "meta.json").read_text())["procedural"]
-        if not meta["describable"]:
-            continue
-        result = compile_cabinet(source, out, cache_dir=compile_cache)
-        assert result.status == "built", f"{source.name} ({meta['layout']}): {result.reason}: {result.message}"
-        chosen.append(Compiled(source.name, source, out / source.name, result.info, result))
-        kinds = [t["type"] for c in chosen for t in c.info["targets"]]
-        doubles = [c for c in chosen if [t["type"] for t in c.info["targets"]].count("door") >= 2]
-        if len(chosen) >= N_PROC_CABINETS and "drawer" in kinds and doubles:
-            break
+    with shared_dir(tmp_path_factory, "proc_cabinets") as out:  # "cached": another process built them
+        for source in proc_sources:
+            meta = json.loads((source / "meta.json").read_text())["procedural"]
+            if not meta["describable"]:
+                continue
+            result = compile_cabinet(source, out, cache_dir=compile_cache)
+            assert result.status in ("built", "cached"), \
+                f"{source.name} ({meta['layout']}): {result.reason}: {result.message}"
+            chosen.append(Compiled(source.name, source, out / source.name, result.info))
+            kinds = [t["type"] for c in chosen for t in c.info["targets"]]
+            doubles = [c for c in chosen if [t["type"] for t in c.info["targets"]].count("door") >= 2]
+            if len(chosen) >= N_PROC_CABINETS and "drawer" in kinds and doubles:
+                break
     kinds = [t["type"] for c in chosen for t in c.info["targets"]]
     doubles = [c for c in chosen if [t["type"] for t in c.info["targets"]].count("door") >= 2]
     assert len(chosen) >= N_PROC_CABINETS, "too few describable procedural cabinets"
@@ -171,8 +171,11 @@ def small_dataset(proc_sources, tmp_path_factory) -> Path:
     """A compiled dataset (manifest + cabinets) of the first dozen procedural sources."""
     from opend_mj.assets.dataset import build_dataset
 
-    out = tmp_path_factory.mktemp("small_dataset")
-    build_dataset(proc_sources[:12], out, workers=2, progress=False, log=lambda *a: None)
+    from opend_mj.assets.layout import MANIFEST
+
+    with shared_dir(tmp_path_factory, "small_dataset") as out:  # built by the first process to need it
+        if not (out / MANIFEST).is_file():
+            build_dataset(proc_sources[:12], out, workers=1, progress=False, log=lambda *a: None)
     return out
 
 

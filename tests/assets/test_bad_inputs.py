@@ -133,6 +133,7 @@ def test_good_sources_compile(good_sources, tmp_path):
         assert compile_cabinet(src, tmp_path / "out").status == "built"
 
 
+@pytest.mark.slow
 def test_dataset_over_good_and_broken_sources(good_sources, tmp_path):
     broken_root = tmp_path / "broken"
     broken = [_broken(good_sources[0], broken_root, name)[0] for name in sorted(CASES)]

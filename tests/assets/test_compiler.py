@@ -339,6 +339,7 @@ def test_procedural_collision_geometry_is_the_visual_surface(proc_cabinets):
         assert gap["collision"] == pytest.approx(gap["visual"], abs=1e-4)
 
 
+@pytest.mark.slow
 def test_real_cabinet_fidelity(real_cabinet):
     """45780: visual surfaces are covered, fronts and handles seen from the front within 2 mm, the bar's
     gap to the door is kept (the handle splitter's hull budget leaves the curved bar a few mm off)."""

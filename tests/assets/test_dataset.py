@@ -25,7 +25,8 @@ def sources(proc_sources) -> list[Path]:
 @pytest.fixture(scope="module")
 def built(sources, tmp_path_factory):
     out = tmp_path_factory.mktemp("dataset")
-    manifest = build_dataset(sources, out, workers=2, progress=False, log=lambda *a: None)
+    # in this process: the process pool is tested by test_cli_build_assets and test_bad_inputs
+    manifest = build_dataset(sources, out, workers=1, progress=False, log=lambda *a: None)
     return out, manifest
 
 
@@ -155,6 +156,7 @@ def test_list_sources(sources, tmp_path):
         list_sources(tmp_path / "missing")
 
 
+@pytest.mark.slow
 def test_cli_build_assets(tmp_path):
     out = tmp_path / "cabinets"
     result = CliRunner().invoke(main, ["build-assets", "--count", str(N), "--out", str(out), "--workers", "2",

@@ -115,6 +115,7 @@ def _spawn(dataset, out, *extra) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
+@pytest.mark.slow
 def test_concurrent_runs_write_each_episode_once(small_dataset, tmp_path):
     """Two `opend run` on one file at the same time: the second is refused (or, with --wait, waits
     and then finds every episode done); the file holds each episode once."""

@@ -54,6 +54,7 @@ def _records(path: Path) -> list[dict]:
     return sorted((strip_wall_clock(r) for r in recs), key=episode_key)
 
 
+@pytest.mark.slow
 def test_ray_run_matches_the_process_pool(ray_instance, dataset, tmp_path):
     common = ["run", "--hand", HAND, "--split", "all", "--limit", "3", "--seed", "1", "--cabinets", str(dataset)]
     pool, ray_out = tmp_path / "pool.jsonl", tmp_path / "ray.jsonl"
@@ -93,6 +94,7 @@ def test_ray_errors_are_records(ray_instance, tmp_path):
     assert "cabinet.json" in rec["error_reason"]
 
 
+@pytest.mark.slow
 def test_build_dataset_on_ray_matches_local(ray_instance, sources, tmp_path):
     from opend_mj.assets.dataset import build_dataset
 

@@ -67,6 +67,7 @@ def _opend(*args) -> list[str]:
 # --------------------------------------------------------------------------------------------------
 # kill -9 and resume
 # --------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_kill_9_then_resume(dataset, tmp_path):
     out = tmp_path / "results.jsonl"
     cmd = _opend("run", "--hand", HAND, "--split", "all", "--cabinets", dataset, "--limit", 6, "--workers", 1,
@@ -274,6 +275,7 @@ def test_bad_arguments_exit_2(args, message, dataset, tmp_path):
 # --------------------------------------------------------------------------------------------------
 # determinism
 # --------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_same_seed_same_file_whatever_the_workers(dataset, tmp_path):
     """Two episodes, twice with one worker and once with two: the same lines in the same (job) order,
     apart from the wall-clock fields."""

@@ -166,6 +166,7 @@ def test_plain_views_show_the_cabinet_light_grey(tmp_path):
     assert np.median(spread) <= 3, "a plain cabinet is grey"
 
 
+@pytest.mark.slow
 def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     from opend_mj.policy.learned.affordance import AffordanceConfig, CLIPortSolver
     from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
@@ -318,6 +319,7 @@ def test_a_drawer_position_is_read_among_the_whole_stack(front_view):
     assert len(stack) == 3 and all(boxes[i, 0] < 128 for i in stack)
 
 
+@pytest.mark.slow
 def test_the_shipped_detector_finds_the_handles_of_a_generated_image(tiny_data):
     """checkpoints/fasterrcnn.pt (trained on generated renders only) at its own threshold: most
     handles of a generated four-door cabinet are detected (IoU >= 0.5), and a named door's box is

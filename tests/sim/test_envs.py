@@ -96,6 +96,7 @@ def test_options_fix_the_episode(small_dataset):
         env.close()
 
 
+@pytest.mark.slow
 def test_vector_env_of_two_processes_steps(small_dataset):
     envs = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="async", vector_kwargs={"context": "spawn"},
                         cabinets=str(small_dataset), split="all", hand="franka")

@@ -52,7 +52,8 @@ def coacd_decompose(
 
 
 def coacd_rest(rv, rf, config, cache_dir, stats, hulls) -> None:
-    """The former path: everything that is not convex in one CoACD run (config.decomposer == "coacd")."""
+    """Hulls of pieces that are not convex from one CoACD run over all of them (``config.decomposer ==
+    "coacd"``); convex and flat pieces become one hull each, as on the splitter path."""
     wv, wf = weld(rv, rf)
     rest_v, rest_f, offset = [], [], 0
     for pv, pf in pieces(wv, wf):

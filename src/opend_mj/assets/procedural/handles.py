@@ -26,7 +26,8 @@ class HandleStyle:
 
 
 def handle_style(rng: np.random.Generator, cfg: GeneratorConfig, target: str,
-                  kind: str | None = None) -> HandleStyle:
+                 kind: str | None = None) -> HandleStyle:
+    """The handle design of one target type (``kind`` forced, else drawn by the type's weights)."""
     if kind is None:
         p = cfg.drawer_handle_kinds if target == "drawer" else cfg.door_handle_kinds
         kind = HANDLE_KINDS[rng.choice(3, p=list(p))]
@@ -125,7 +126,7 @@ def _knob_pieces(c: np.ndarray, z0: float, rng: np.random.Generator, cfg: Genera
 
 
 def make_handle(rng: np.random.Generator, cfg: GeneratorConfig, st: HandleStyle, panel_lo: np.ndarray,
-                 panel_hi: np.ndarray, center: np.ndarray) -> tuple[list[Piece], str, str]:
+                panel_hi: np.ndarray, center: np.ndarray) -> tuple[list[Piece], str, str]:
     """Handle pieces on the front face of a panel (box lo/hi) centred at ``center`` (x, y)."""
     z0 = float(panel_hi[2])
     pw, ph = float(panel_hi[0] - panel_lo[0]), float(panel_hi[1] - panel_lo[1])

@@ -40,7 +40,7 @@ class Target:
 
 
 def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: float, plinth: float,
-           colours: dict) -> tuple[list[Visual], list[Target]]:
+                colours: dict) -> tuple[list[Visual], list[Target]]:
     """Carcass visuals and movable targets of a layout (metres, mesh frame)."""
     W, H, D = layout.width, layout.height, layout.depth
     g = cfg.clearance

@@ -79,6 +79,7 @@ def piece_bounds(piece: Piece) -> tuple[np.ndarray, np.ndarray]:
 
 
 def translate_piece(p: Piece, d: tuple[float, float, float]) -> Piece:
+    """The piece moved by ``d`` (m)."""
     dv = np.asarray(d)
     if isinstance(p, Box):
         return Box(tuple(np.asarray(p.lo) + dv), tuple(np.asarray(p.hi) + dv))
@@ -86,5 +87,6 @@ def translate_piece(p: Piece, d: tuple[float, float, float]) -> Piece:
 
 
 def bounds_of(pieces: list[Piece]) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounds (m) of a list of pieces."""
     bs = [piece_bounds(p) for p in pieces]
     return np.min([b[0] for b in bs], axis=0), np.max([b[1] for b in bs], axis=0)

@@ -18,6 +18,7 @@ def png_asset(arr: np.ndarray) -> mjcf.Asset:
 
 
 def tex_wood(rng, base, size=256, planks=8) -> np.ndarray:
+    """Wood planks (size x size RGB, 0-255) around the colour ``base`` (0-1)."""
     h = w = size
     ph = h // planks
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
@@ -38,6 +39,7 @@ def tex_wood(rng, base, size=256, planks=8) -> np.ndarray:
 
 
 def tex_brick(rng, brick, mortar, size=128) -> np.ndarray:
+    """Bricks of colour ``brick`` in ``mortar`` (0-1), size x size RGB 0-255."""
     h = w = size
     bh, bw = 16, 32
     img = np.empty((h, w, 3))
@@ -55,6 +57,7 @@ def tex_brick(rng, brick, mortar, size=128) -> np.ndarray:
 
 
 def tex_stripes(rng, c1, c2, size=128) -> np.ndarray:
+    """Vertical stripes of colours ``c1`` and ``c2`` (0-1), size x size RGB 0-255."""
     w = size
     period = int(rng.choice([16, 32, 64]))
     frac = rng.uniform(0.3, 0.7)
