@@ -165,14 +165,12 @@ def test_hand_scene_includes_its_hand(hand):
 
 #: Largest module (lines) in the package: a longer one holds more than one job and is split.
 MAX_MODULE_LINES = 600
-#: Modules over the limit whose split is under way (issue 34): remove each when it is split.
-SPLIT_PENDING = {"opend_mj.policy.planner", "opend_mj.policy.perception"}
 
 
 def test_no_module_is_longer_than_the_limit():
     lengths = {m: len(p.read_text().splitlines()) for m, p in MODULES.items()}
     assert len(lengths) > 50 and sum(lengths.values()) > 10000  # the walk really reads the package
-    over = {m: n for m, n in lengths.items() if n > MAX_MODULE_LINES and m not in SPLIT_PENDING}
+    over = {m: n for m, n in lengths.items() if n > MAX_MODULE_LINES}
     assert not over, f"modules over {MAX_MODULE_LINES} lines (split them along their jobs): {over}"
 
 
