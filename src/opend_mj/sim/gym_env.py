@@ -76,20 +76,18 @@ class OpenCabinetEnv(gym.Env):
         self.action_names = self.core.action_names()
 
     def _obs(self, raw: dict) -> dict:
-        out = {}
-        for key, space in self.observation_space.spaces.items():
-            value = raw[key]
-            out[key] = value if isinstance(space, gym.spaces.Text) else np.asarray(value, dtype=space.dtype)
-        return out
+        """The core's observation in the spaces' dtypes and key order (the core already gives float32
+        views of one vector, rgb uint8 and depth float32; this only orders the keys)."""
+        return {key: raw[key] for key in self.observation_space.spaces}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         episode_seed = int(seed) if seed is not None else int(self.np_random.integers(2**31 - 1))
-        obs, info = self.core.reset(episode_seed, options)
+        obs, info = self.core.reset(episode_seed, options, dtype=np.float32)
         return self._obs(obs), info
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.core.step(np.asarray(action, dtype=np.float64))
+        obs, reward, terminated, truncated, info = self.core.step(action, dtype=np.float32)
         return self._obs(obs), float(reward), terminated, truncated, info
 
     def render(self):

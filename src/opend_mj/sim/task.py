@@ -276,15 +276,18 @@ class OpenCabinetTask(composer.Task):
         if self._path_quat is not None:
             physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
 
-    def fast_substeps(self, physics) -> list[str]:
+    def fast_substeps(self, physics, cameras: bool = True) -> list[str]:
         """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
 
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
         composer's per-substep Python hooks; where the mocap does not move, the substeps are one
         ``mj_step(model, data, n)`` call. Afterwards the kinematics (bodies, sites, geoms, cameras,
         lights) are brought up to date with the new state, so that readers see where things are;
-        this does not change the trajectory (each ``mj_step`` recomputes them first). Returns the
-        names of MuJoCo instability warnings raised in this control step.
+        this does not change the trajectory (each ``mj_step`` recomputes them first). With
+        ``cameras=False`` only body, geom and site poses are brought up to date (``mj_kinematics``),
+        not centre-of-mass quantities, cameras or lights: for readers that render nothing and read
+        no camera (the state-only environments). Returns the names of MuJoCo instability warnings
+        raised in this control step.
         """
         model, data = physics.model.ptr, physics.data.ptr
         stats = self._warning_stats(data)
@@ -301,8 +304,9 @@ class OpenCabinetTask(composer.Task):
                     mocap_quat[mid] = path_quat[i]
                 _mujoco.mj_step(model, data)
         _mujoco.mj_kinematics(model, data)
-        _mujoco.mj_comPos(model, data)
-        _mujoco.mj_camlight(model, data)
+        if cameras:
+            _mujoco.mj_comPos(model, data)
+            _mujoco.mj_camlight(model, data)
         return [_WARNING_NAMES[i] for i, (w, n) in enumerate(zip(stats, before)) if w.number > n]
 
     def _warning_stats(self, data) -> list:
