@@ -43,12 +43,13 @@ from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
 from opend_mj.language import describe_instruction  # noqa: E402
-from opend_mj.sim.hands import get_hand, load_spec, touch_parts  # noqa: E402
+from opend_mj.sim.hands import touch_parts  # noqa: E402
 from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, sparse_reward  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
+from opend_mj.sim.actions import ABSOLUTE_ROOT_HIGH, ABSOLUTE_ROOT_LOW, ActionAdapter  # noqa: E402,F401
 from opend_mj.sim.scene_reader import PROPRIO_KEYS, SceneReader  # noqa: E402,F401  (SceneReader: re-exported)
 from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
-from opend_mj.transforms import axis_angle_quat, mat_to_quat, quat_mul, turn_about_z  # noqa: E402
+from opend_mj.transforms import turn_about_z  # noqa: E402
 
 OBS_MODES = ("state", "rgb", "depth", "rgbd")
 CONTROLS = ("delta", "absolute")
@@ -66,9 +67,6 @@ CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
 #: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
 PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
 
-#: Root position bounds of the absolute action space (the task clips to the cabinet's bounds +- 1.5 m).
-ABSOLUTE_ROOT_LOW = (-3.0, -3.0, 0.0)
-ABSOLUTE_ROOT_HIGH = (3.0, 3.0, 3.0)
 
 
 def instruction_onehot(text: str) -> np.ndarray:
@@ -218,86 +216,6 @@ class StartPoseTask(OpenCabinetTask):
         return pos, quat
 
 
-class ActionAdapter:
-    """Turns a normalised delta action into the task's own action (see the module doc)."""
-
-    def __init__(self, hand: str, task_config: TaskConfig):
-        import mujoco
-
-        self.spec = load_spec(hand)
-        model = mujoco.MjModel.from_xml_path(str(get_hand(hand).xml_path))
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in self.spec.actuator_names]
-        ranges = model.actuator_ctrlrange[ids]
-        self.finger_low, self.finger_high = ranges[:, 0].copy(), ranges[:, 1].copy()
-        self.n_fingers = len(ids)
-        self.step_pos = task_config.max_root_speed / task_config.control_hz
-        self.step_rot = task_config.max_root_angular_speed / task_config.control_hz
-
-    @property
-    def delta_dim(self) -> int:
-        return 6 + self.n_fingers
-
-    @property
-    def absolute_dim(self) -> int:
-        return 7 + self.n_fingers
-
-    def absolute_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        low = np.concatenate([ABSOLUTE_ROOT_LOW, -np.ones(4), self.finger_low])
-        high = np.concatenate([ABSOLUTE_ROOT_HIGH, np.ones(4), self.finger_high])
-        return low, high
-
-    def fingers_from_unit(self, unit) -> np.ndarray:
-        u = np.clip(np.asarray(unit, float), -1.0, 1.0)
-        return self.finger_low + (u + 1.0) * 0.5 * (self.finger_high - self.finger_low)
-
-    def fingers_to_unit(self, fingers) -> np.ndarray:
-        span = np.maximum(self.finger_high - self.finger_low, 1e-12)
-        return np.clip(2.0 * (np.asarray(fingers, float) - self.finger_low) / span - 1.0, -1.0, 1.0)
-
-    def from_delta(self, action, mocap_pos, mocap_quat) -> np.ndarray:
-        """The task's action for a delta action from the current mocap pose.
-
-        Plain float arithmetic where numpy's would be per-call overhead on 3- and 4-vectors; the
-        operations and their order are those of ``pos + a * step``, `axis_angle_quat`, `quat_mul`
-        and `fingers_from_unit` (``np.linalg.norm`` of a vector is ``sqrt(v.dot(v))``), so the
-        numbers are the same to the bit.
-        """
-        a = np.clip(np.asarray(action, float), -1.0, 1.0)
-        if a.shape != (self.delta_dim,):
-            raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
-        out = np.empty(7 + self.n_fingers)
-        out[:3] = mocap_pos + a[:3] * self.step_pos
-        rotvec = a[3:6] * self.step_rot
-        angle = math.sqrt(rotvec @ rotvec)
-        if angle > 1e-12:
-            axis = rotvec / angle
-            axis = axis / math.sqrt(axis.dot(axis))
-            s = float(np.sin(angle / 2))
-            w1, x1, y1, z1 = float(np.cos(angle / 2)), s * float(axis[0]), s * float(axis[1]), s * float(axis[2])
-            w2, x2, y2, z2 = np.asarray(mocap_quat, float).tolist()
-            quat = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                             w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-            out[3:7] = quat / math.sqrt(quat.dot(quat))
-        else:
-            out[3:7] = mocap_quat
-        out[7:] = self.finger_low + (a[6:] + 1.0) * 0.5 * (self.finger_high - self.finger_low)
-        return out
-
-    def from_delta_reference(self, action, mocap_pos, mocap_quat) -> np.ndarray:
-        """`from_delta` written with the rotation helpers (the reference it is tested against)."""
-        a = np.clip(np.asarray(action, float), -1.0, 1.0)
-        if a.shape != (self.delta_dim,):
-            raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
-        pos = np.asarray(mocap_pos, float) + a[:3] * self.step_pos
-        rotvec = a[3:6] * self.step_rot
-        angle = float(math.sqrt(rotvec @ rotvec))
-        quat = np.asarray(mocap_quat, float)
-        if angle > 1e-12:
-            quat = quat_mul(axis_angle_quat(rotvec / angle, angle), quat)
-            quat = quat / np.linalg.norm(quat)
-        return np.concatenate([pos, quat, self.fingers_from_unit(a[6:])])
-
-
 class OpenDCore:
     """The engine of the environments over the dataset: sampling, scenes, observations, rewards.
 
@@ -405,9 +323,10 @@ class OpenDCore:
             return self.adapter.from_delta_reference(action, d.mocap_pos[mid], d.mocap_quat[mid])
         return self.adapter.from_delta(action, d.mocap_pos[mid], d.mocap_quat[mid])
 
-    def step(self, action, dtype=np.float64) -> tuple[dict, float, bool, bool, dict]:
+    def step(self, action, dtype=np.float64, observe: bool = True) -> tuple[dict | None, float, bool, bool, dict]:
         """One control step: (observation, reward, terminated, truncated, info); float observations
-        in ``dtype`` (rgb stays uint8, depth float32)."""
+        in ``dtype`` (rgb stays uint8, depth float32). ``observe=False`` returns None for the
+        observation: the caller reads the float vector (`flat`) and `images` itself."""
         if self._needs_reset:
             raise RuntimeError("the episode is over (or never started): call reset() first")
         scene = self.scene
@@ -440,7 +359,8 @@ class OpenDCore:
         info = self._info(terms)
         if warnings:
             info["physics_warnings"] = warnings
-        return self.observe(dtype, filled=self.config.lean_step), reward, terminated, truncated, info
+        obs = self.observe(dtype, filled=self.config.lean_step) if observe else None
+        return obs, reward, terminated, truncated, info
 
     def _reward(self, terms) -> float:
         if self.config.reward_mode == "sparse":
@@ -474,13 +394,26 @@ class OpenDCore:
                 obs.update({k: np.asarray(v, dtype=dtype) for k, v in scene.privileged().items()})
         if c.instruction == "text":
             obs["instruction"] = self.episode.instruction
-        if c.obs_mode == "rgbd":
-            obs["rgb"], obs["depth"] = scene.render()
-        elif c.obs_mode == "rgb":
-            obs["rgb"] = scene.render_rgb()
-        elif c.obs_mode == "depth":
-            obs["depth"] = scene.render_depth()
+        obs.update(self.images())
         return obs
+
+    @property
+    def flat(self) -> np.ndarray:
+        """The float observation vector of the current state (float64, `flat_layout`; lean step only:
+        valid after `reset` and `step`). Read-only to callers."""
+        return self._flat
+
+    def images(self) -> dict[str, np.ndarray]:
+        """What the observation mode renders, now: rgb (uint8 HxWx3) and/or depth (float32 HxW, m)."""
+        mode, scene = self.config.obs_mode, self.scene
+        if mode == "rgbd":
+            rgb, depth = scene.render()
+            return {"rgb": rgb, "depth": depth}
+        if mode == "rgb":
+            return {"rgb": scene.render_rgb()}
+        if mode == "depth":
+            return {"depth": scene.render_depth()}
+        return {}
 
     def render(self) -> np.ndarray:
         return self.scene.render_rgb() if self.scene is not None else None

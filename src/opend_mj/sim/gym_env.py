@@ -12,8 +12,7 @@ action are)::
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["success"], info["open_ratio"], info["others_moved"]
 
-    envs = gym.make_vec("opend/OpenCabinet-v0", num_envs=4, vectorization_mode="async",
-                        vector_kwargs={"context": "spawn"}, cabinets="cabinets")
+    envs = gym.make_vec("opend/OpenCabinet-v0", num_envs=2, cabinets="cabinets")  # shared-memory workers
 
 ``opend/OpenDrawer-v0`` and ``opend/OpenDoor-v0`` sample drawers or doors only. Without importing
 this module first, ``gym.make("opend_mj.sim.gym_env:opend/OpenCabinet-v0", ...)`` imports it.
@@ -116,7 +115,8 @@ def register_envs() -> None:
     """Register the ids of `ENV_IDS` with gymnasium (done on import; repeated calls are no-ops)."""
     for env_id, kwargs in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="opend_mj.sim.gym_env:OpenCabinetEnv", kwargs=dict(kwargs))
+            gym.register(id=env_id, entry_point="opend_mj.sim.gym_env:OpenCabinetEnv",
+                         vector_entry_point="opend_mj.sim.vector_env:OpenDVectorEnv", kwargs=dict(kwargs))
 
 
 register_envs()
