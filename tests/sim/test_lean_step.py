@@ -118,3 +118,20 @@ def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_datas
     finally:
         envs.close()
         single.close()
+
+
+def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):
+    env = gym.make(ENV_ID, cabinets=str(small_dataset), split="all", hand="franka", privileged=True,
+                   range_success=0.02, terminate_on_success=False)
+    try:
+        obs, info = env.reset(seed=0)
+        seen = set()
+        for t in range(220):
+            obs, reward, terminated, truncated, info = env.step(_scripted(obs, t, env.action_space.shape))
+            ratio = info["reward_terms"]["range_ratio"]
+            assert info["success"] == (ratio >= 0.02)
+            assert (reward == 1.0) == (info["success"] and not info["others_moved"])
+            seen.add(info["success"])
+        assert seen == {False, True}  # the scripted pull crossed 2 % of the range
+    finally:
+        env.close()

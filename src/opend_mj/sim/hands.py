@@ -392,6 +392,10 @@ class HandTouch:
 
     def vector(self) -> np.ndarray:
         """Force per part, in `parts` order (0: the part touches nothing)."""
+        return self.vector_from(self._d.contact)
+
+    def vector_reference(self) -> np.ndarray:
+        """`vector` one contact at a time through ``mj_contactForce`` (the reference; any cone)."""
         m, d = self._m, self._d
         force = np.zeros(len(self.parts))
         other = len(self.parts) - 1
@@ -412,7 +416,7 @@ class HandTouch:
         if not len(contact.geom1):
             return np.zeros(len(self.parts))
         if not self._elliptic and int(np.max(contact.dim)) > 1:
-            return self.vector()
+            return self.vector_reference()
         g1, g2, adr = contact.geom1, contact.geom2, contact.efc_address
         h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
         mixed = h1 != h2

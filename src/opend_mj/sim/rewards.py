@@ -57,12 +57,14 @@ class RewardTerms:
     reach: float = 0.0
     open: float = 0.0
     others: float = 0.0
+    range_ratio: float = 0.0  # fraction of the instructed target's joint range opened
 
     def to_dict(self) -> dict:
         """The fields as a plain dict (what ``asdict`` gives, without its deep copy: all are scalars)."""
         return {"distance": self.distance, "start_distance": self.start_distance, "contact": self.contact,
                 "open_ratio": self.open_ratio, "others_range": self.others_range, "success": self.success,
-                "others_moved": self.others_moved, "reach": self.reach, "open": self.open, "others": self.others}
+                "others_moved": self.others_moved, "reach": self.reach, "open": self.open, "others": self.others,
+                "range_ratio": self.range_ratio}
 
 
 def clip01(x: float, lo: float = 0.0, hi: float = 1.0) -> float:
@@ -242,7 +244,8 @@ class RewardProbe:
         return RewardTerms(distance=self.distance(self.handle_box_reference()), start_distance=self.start_distance,
                            contact=self.contact(),
                            open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
-                           success=bool(outcome.success), others_moved=bool(outcome.others_moved))
+                           success=bool(outcome.success), others_moved=bool(outcome.others_moved),
+                           range_ratio=float(outcome.range_ratio))
 
     def read(self, geom1: np.ndarray, geom2: np.ndarray, box=None) -> RewardTerms:
         """The reward terms of `terms`, from the contacts' geom pairs (``data.contact.geom1/2``, read
@@ -260,4 +263,5 @@ class RewardProbe:
             contact = False
         return RewardTerms(distance=self.distance(box), start_distance=self.start_distance, contact=contact,
                            open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
-                           success=bool(outcome.success), others_moved=bool(outcome.others_moved))
+                           success=bool(outcome.success), others_moved=bool(outcome.others_moved),
+                           range_ratio=float(outcome.range_ratio))

@@ -66,7 +66,7 @@ class SceneReader:
             "grasp_site_quat": mat_to_quat(d.site_xmat[self._site].reshape(3, 3)),
             "mocap_pos": d.mocap_pos[self._mocap].copy(),
             "mocap_quat": d.mocap_quat[self._mocap].copy(),
-            "touch": self._touch.vector(),
+            "touch": self._touch.vector_reference(),
             "time": np.array([float(d.time)]),
         }
 

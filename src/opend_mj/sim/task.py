@@ -403,14 +403,18 @@ class OpenDEnvironment(composer.Environment):
     `OpenCabinetTask.fast_substeps` gives the same trajectory as composer's loop, several times
     faster. Where every enabled observable is read once per control step with no buffer, delay or
     aggregator (the task's own observables are), observations are read directly instead of through
-    composer's observation buffers; the values are the same. The MJCF never changes between episodes
+    composer's observation buffers; the values are the same. With ``observations=False`` those
+    plain reads are skipped and ``step`` returns an empty observation. The MJCF never changes between episodes
     of one task, so a reset does not recompile it. MuJoCo instability warnings are recorded in
     `task.physics_warnings` and end the episode.
     """
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, observations: bool = True, **kwargs):
         kwargs.setdefault("recompile_mjcf_every_episode", False)
         super().__init__(*args, **kwargs)
+        #: False: ``step`` returns an empty observation (for callers that read MjData themselves,
+        #: as the planner does: five observables read and copied per control step for nothing)
+        self._step_observations = bool(observations)
         # The constructor has just compiled the model and nothing changes it per episode.
         self._mjcf_never_compiled = self._recompile_mjcf_every_episode
         self._plain_readers = None
@@ -438,7 +442,7 @@ class OpenDEnvironment(composer.Environment):
             self._reset_next_step = False
             return self.reset()
         task, physics, proxy = self._task, self._physics, self._physics_proxy
-        readers = self._plain_readers
+        readers = self._plain_readers if self._step_observations or self._plain_readers is None else ()
         self._hooks.before_step(proxy, action, self._random_state)
         if readers is None:
             updater = self._observation_updater
@@ -496,8 +500,13 @@ def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
     return np.array(rows)
 
 
-def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
-    """A dm_control composer Environment for one episode (time limit from the config)."""
+def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,
+                     observations: bool = True):
+    """A dm_control composer Environment for one episode (time limit from the config).
+
+    ``observations=False``: ``step`` returns no observation (see `OpenDEnvironment`); ``reset``
+    still does."""
     task = OpenCabinetTask(episode, config)
     return OpenDEnvironment(task, time_limit=config.time_limit, random_state=episode.seed,
-                                strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False)
+                            strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False,
+                            observations=observations)

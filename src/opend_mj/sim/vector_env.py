@@ -30,7 +30,7 @@ from gymnasium.vector.utils import batch_space
 #: Numeric info per step (float64 in shared memory) and the reward terms' fields.
 _INFO_KEYS = ("success", "open_ratio", "others_moved", "sim_time")
 _TERM_KEYS = ("distance", "start_distance", "contact", "open_ratio", "others_range", "success", "others_moved",
-              "reach", "open", "others")
+              "reach", "open", "others", "range_ratio")
 _BOOL_KEYS = {"success", "others_moved", "contact"}
 #: Strings and integers that change only when an episode starts (sent through the pipe then).
 _EPISODE_KEYS = ("instruction", "cabinet", "target", "target_type", "room", "episode_seed")
