@@ -35,6 +35,7 @@ import dataclasses
 import gymnasium as gym
 import numpy as np
 
+from opend_mj.sim.spaces import action_space, observation_space
 from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
 _ARRAY_KEYS = ("rgb", "depth", "hand_joint_pos", "root_pos", "root_quat")
@@ -61,17 +62,8 @@ class OpenCabinetEnv(gym.Env):
 
         self.render_mode = render_mode
         self.core = OpenDCore(make_config(**kwargs))
-        spaces = {}
-        for key, (shape, kind) in self.core.observation_layout().items():
-            if kind == "text":
-                spaces[key] = gym.spaces.Text(max_length=128, charset=_CHARSET)
-            elif kind == "uint8":
-                spaces[key] = gym.spaces.Box(0, 255, shape, np.uint8)
-            else:
-                spaces[key] = gym.spaces.Box(*_bounds(key), shape, np.float32)
-        self.observation_space = gym.spaces.Dict(spaces)
-        low, high = self.core.action_bounds()
-        self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self.observation_space = observation_space(self.core)
+        self.action_space = action_space(self.core)
         self.action_names = self.core.action_names()
 
     def _obs(self, raw: dict) -> dict:
@@ -94,21 +86,6 @@ class OpenCabinetEnv(gym.Env):
 
     def close(self):
         self.core.close()
-
-
-def _bounds(key: str) -> tuple[float, float]:
-    """Bounds of a float observation: unit for quaternions and codes, else wide (never reached)."""
-    if key.endswith("_quat"):
-        return -1.0, 1.0
-    if key in ("instruction", "open_ratio"):
-        return 0.0, 1.0
-    if key in ("depth", "time", "handle_size"):
-        return 0.0, _WIDE
-    return -_WIDE, _WIDE
-
-
-_WIDE = 1.0e4
-_CHARSET = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 ,.'-"
 
 
 def register_envs() -> None:

@@ -22,7 +22,6 @@ import multiprocessing as mp
 import pickle
 import traceback
 
-import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -128,7 +127,8 @@ class OpenDVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int = 2, **kwargs):
-        from opend_mj.sim.gym_env import OpenCabinetEnv
+        from opend_mj.sim.envs import OpenDCore, make_config
+        from opend_mj.sim.spaces import action_space, observation_space
 
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, not {num_envs}")
@@ -138,15 +138,16 @@ class OpenDVectorEnv(VectorEnv):
         if kwargs.get("lean_step") is False:
             raise ValueError("the shared-memory vector environment reads the lean step's observation vector: "
                              "lean_step=False is for single environments")
-        probe = OpenCabinetEnv(**kwargs)  # spaces and layout, in this process (builds no scene)
+        core = OpenDCore(make_config(**kwargs))  # spaces and layout, in this process (builds no scene)
         try:
-            self.single_observation_space = probe.observation_space
-            self.single_action_space = probe.action_space
-            layout = probe.core.flat_layout()
-            flat_size = probe.core.flat_size
-            images = {k: probe.observation_space[k] for k in ("rgb", "depth") if k in probe.observation_space.spaces}
+            self.single_observation_space = observation_space(core)
+            self.single_action_space = action_space(core)
+            layout = core.flat_layout()
+            flat_size = core.flat_size
+            images = {k: self.single_observation_space[k] for k in ("rgb", "depth")
+                      if k in self.single_observation_space.spaces}
         finally:
-            probe.close()
+            core.close()
         self.num_envs = int(num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
