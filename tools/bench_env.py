@@ -92,7 +92,8 @@ def state_figures(base: dict, steps: int) -> dict:
             "cpu_ceiling": cpu_raw_rate / substeps, "cpu_state": statistics.median(cpu_rates)}
 
 
-def vector_rate(base: dict, steps: int, n: int, mode: str | None = None) -> float:
+def vector_rate(base: dict, steps: int, n: int, mode: str | None = None) -> tuple[float, float]:
+    """(steps of all environments per second, the main process's CPU seconds per vector step)."""
     kwargs = {"vectorization_mode": mode, "vector_kwargs": {"context": "spawn"}} if mode else {}
     envs = gym.make_vec(ENV_ID, num_envs=n, obs_mode="state", **kwargs, **base)
     try:
@@ -100,10 +101,11 @@ def vector_rate(base: dict, steps: int, n: int, mode: str | None = None) -> floa
         actions = _actions(envs.action_space, steps)
         for a in actions[:50]:
             envs.step(a)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         for a in actions:
             envs.step(a)
-        return n * steps / (time.perf_counter() - start)
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+        return n * steps / wall, cpu / steps
     finally:
         envs.close()
 
@@ -144,9 +146,9 @@ def main() -> None:
     s = state_figures(base, args.steps)
     print(f"raw mj_step {s['raw_mj_step']:.0f}/s -> ceiling {s['ceiling']:.0f} control steps/s; "
           f"state env {s['state']:.0f} steps/s ({s['state'] / s['ceiling']:.2f} of the ceiling)", flush=True)
-    vec1 = vector_rate(base, args.steps, 1)
-    vec2 = vector_rate(base, args.steps, 2)
-    async2 = vector_rate(base, args.steps, 2, mode="async")
+    vec1, main1 = vector_rate(base, args.steps, 1)
+    vec2, main2 = vector_rate(base, args.steps, 2)
+    async2, main_async = vector_rate(base, args.steps, 2, mode="async")
     print(f"vector env: 1 process {vec1:.0f}, 2 processes {vec2:.0f} steps/s; gymnasium async 2 processes "
           f"{async2:.0f}", flush=True)
     images = []
@@ -166,9 +168,13 @@ def main() -> None:
     print(f"| **state steps/s, 1 process** | **{s['state']:.0f}** | **{s['state'] / s['ceiling']:.2f} of the ceiling** |")
     print(f"| the same in CPU time of the process (steps per CPU second; ceiling {s['cpu_ceiling']:.0f}) | "
           f"{s['cpu_state']:.0f} | {s['cpu_state'] / s['cpu_ceiling']:.2f} of the ceiling |")
-    print(f"| state steps/s, vector env, 1 worker process | {vec1:.0f} | {vec1 / s['state']:.2f}x 1 process |")
-    print(f"| **state steps/s, vector env, 2 worker processes** | **{vec2:.0f}** | **{vec2 / s['state']:.2f}x 1 process** |")
-    print(f"| state steps/s, gymnasium AsyncVectorEnv, 2 processes | {async2:.0f} | {async2 / s['state']:.2f}x 1 process |")
+    us = 1e6
+    print(f"| state steps/s, vector env, 1 worker process (main process CPU per step {main1 * us:.0f} us) | "
+          f"{vec1:.0f} | {vec1 / s['state']:.2f}x 1 process |")
+    print(f"| **state steps/s, vector env, 2 worker processes** (main process CPU per step {main2 * us:.0f} us) | "
+          f"**{vec2:.0f}** | **{vec2 / s['state']:.2f}x 1 process** |")
+    print(f"| state steps/s, gymnasium AsyncVectorEnv, 2 processes (main process CPU per step {main_async * us:.0f} us) "
+          f"| {async2:.0f} | {async2 / s['state']:.2f}x 1 process |")
     for size, f, ceiling in images:
         print(f"| RGB-D {size}x{size} steps/s, 1 process | {f['rgbd']:.0f} | {f['rgbd'] / ceiling:.2f} of physics + "
               f"rendering ({ceiling:.0f}) |")

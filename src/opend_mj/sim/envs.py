@@ -12,10 +12,12 @@ Compiled scenes are reused as `opend run` reuses them: a scene is keyed by (cabi
 appearance seed); another target of the same cabinet is set with ``Task.set_target`` and a full
 reset, which gives the same state as a scene of its own. The last ``max_scenes`` scenes are kept.
 
-Observations (``obs_mode``): ``"state"`` renders nothing; ``"rgbd"`` adds the front camera's RGB and
-depth and its intrinsics and pose. ``privileged=True`` adds ground truth (the instructed handle's
+Observations (``obs_mode``): ``"state"`` renders nothing; ``"rgb"``, ``"depth"`` and ``"rgbd"`` add
+that much of the front camera's image (``image_size`` square, e.g. 128 or 256) and its intrinsics
+and pose. ``privileged=True`` adds ground truth (the instructed handle's
 box and the open ratio) for RL from state; the benchmark's agents never get it. See the README's
-"Environments" section for the table of keys and action dimensions per hand.
+"Environments" section for the table of keys and action dimensions per hand, and docs/environments.md
+for the step's cost, the vector environment and the two success criteria.
 
 Actions (``control``): ``"delta"`` (default): ``6 + n_fingers`` numbers in [-1, 1]: root
 translation in the world frame (x 1.25 cm: the root's top speed of 0.75 m/s over one 1/60 s control
