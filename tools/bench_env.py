@@ -172,7 +172,7 @@ def main() -> None:
     print(f"| state steps/s, vector env, 1 worker process (main process CPU per step {main1 * us:.0f} us) | "
           f"{vec1:.0f} | {vec1 / s['state']:.2f}x 1 process |")
     print(f"| **state steps/s, vector env, 2 worker processes** (main process CPU per step {main2 * us:.0f} us) | "
-          f"**{vec2:.0f}** | **{vec2 / s['state']:.2f}x 1 process** |")
+          f"**{vec2:.0f}** | **{vec2 / s['state']:.2f}x 1 process, {vec2 / vec1:.2f}x 1 worker** |")
     print(f"| state steps/s, gymnasium AsyncVectorEnv, 2 processes (main process CPU per step {main_async * us:.0f} us) "
           f"| {async2:.0f} | {async2 / s['state']:.2f}x 1 process |")
     for size, f, ceiling in images:
