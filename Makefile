@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real install system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate results eval-real install install-mjx system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -81,6 +81,11 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/pip install -q -e '.[test]'
 	touch $@
 
+## Optional: MJX (MuJoCo in JAX) for opend_mj.sim.batched and its tests (~90 MB download, ~385 MB
+## installed, so `install` and CI leave it out; see docs/batched-simulation.md).
+install-mjx: install
+	$(BIN)/pip install -q -e '.[mjx]'
+
 ## Compile the default dataset: 346 procedural sources -> cabinets/ + manifest.json.
 assets: install
 	$(BIN)/opend build-assets --out $(CABINETS) --workers $(WORKERS) --no-progress
@@ -121,6 +126,7 @@ clean:
 bench-task: install
 	$(BIN)/python tools/bench_task.py
 
-## gymnasium environment steps/s: state-only and RGB-D, 1 process and a 2-process vector env (also in `make bench`).
+## Environment steps/s against MuJoCo's own rate: raw mj_step ceiling, state steps/s and their ratio, the
+## shared-memory vector env with 1 and 2 processes, RGB-D at 128 and 256 against the renderer (also in `make bench`).
 bench-env: install
 	$(BIN)/python tools/bench_env.py --cabinets $(CABINETS)

@@ -8,8 +8,8 @@ Sections (each a subprocess, so that its peak memory can be read):
             default physics timestep (1/480 s) and at 1/120 s
   episodes- here: episodes/min with 1 and 2 workers (scaling); success, contact penetration and speed
             at three physics timesteps; handle solver inference ms per image
-  envs    - tools/bench_env.py: gymnasium environment steps/s, state-only and RGB-D, one process and a
-            2-process vector environment
+  envs    - tools/bench_env.py: raw mj_step ceiling, state steps/s and their ratio to it, the
+            shared-memory vector env with 1 and 2 processes, RGB-D at 128 and 256 against the renderer
 
     python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs] [--out BENCHMARKS.md]
 """
@@ -199,7 +199,7 @@ def main() -> None:
         body += ["## Episodes", "", text, "", f"Peak memory of one process {mem:.0f} MiB.", ""]
     if "envs" in sections:
         out, secs, mem = _run(["tools/bench_env.py", "--cabinets", str(args.cabinets),
-                               "--steps", "300" if quick else "1500"])
+                               "--steps", "300" if quick else "1500", "--image-steps", "100" if quick else "300"])
         body += ["## Environments (gymnasium)", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
     load_after = os.getloadavg()
     header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "

@@ -40,6 +40,32 @@ def mat_to_quat(m) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
+def mat9_to_quat(m9) -> np.ndarray:
+    """`mat_to_quat` of a row-major 9-vector (MuJoCo's ``xmat`` rows), in plain float arithmetic.
+
+    The same operations in the same order as `mat_to_quat` (``np.trace`` sums the diagonal left to
+    right; ``np.linalg.norm`` of a vector is ``sqrt(q.dot(q))``), so the same numbers to the bit,
+    several times faster: for per-step observations.
+    """
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m9.tolist()
+    t = m00 + m11 + m22
+    if t > 0:
+        s = math.sqrt(t + 1.0) * 2
+        q = [0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s]
+    elif m00 > m11 and m00 > m22:
+        s = math.sqrt(1.0 + m00 - m11 - m22) * 2
+        q = [(m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s]
+    elif m11 > m22:
+        s = math.sqrt(1.0 + m11 - m00 - m22) * 2
+        q = [(m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s]
+    else:
+        s = math.sqrt(1.0 + m22 - m00 - m11) * 2
+        q = [(m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s]
+    q = np.array(q)
+    q /= math.sqrt(q.dot(q))
+    return -q if q[0] < 0 else q
+
+
 def quat_mul(a, b) -> np.ndarray:
     """Hamilton product a * b (rotate by b, then by a)."""
     w1, x1, y1, z1 = a

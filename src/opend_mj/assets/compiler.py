@@ -154,7 +154,7 @@ class _MjcfWriter:
         self.cache_dir = cache_dir
         self.stats = DecompositionStats()
         self._memo: dict = {}  # decompositions of this cabinet by piece shape (copies of one part)
-        self.counts = {"hulls": 0, "boxes": 0, "mesh_hulls": 0, "visual_meshes": 0, "textures": 0}
+        self.counts = {"hulls": 0, "boxes": 0, "mesh_hulls": 0, "capped_hulls": 0, "visual_meshes": 0, "textures": 0}
         self.root = ET.Element("mujoco", model=f"cabinet_{source.id}")
         ET.SubElement(self.root, "compiler", angle="radian")
         self._defaults()
@@ -257,7 +257,11 @@ class _MjcfWriter:
                                          "quat": _fmt(mat_to_quat(rot), p), "size": _fmt(half, p)})
             self.counts["boxes"] += 1
             return
-        ET.SubElement(self.asset, "mesh", name=name, vertex=_fmt(hull.vertices, p))
+        mesh = ET.SubElement(self.asset, "mesh", name=name, vertex=_fmt(hull.vertices, p))
+        cap = self.config.max_hull_vertices
+        if cap > 0 and len(hull.vertices) > cap:
+            mesh.set("maxhullvert", str(max(4, cap)))
+            self.counts["capped_hulls"] += 1
         ET.SubElement(body, "geom", {"name": name, "class": cls, "type": "mesh", "mesh": name})
         self.counts["mesh_hulls"] += 1
 

@@ -90,6 +90,11 @@ class CompilerConfig:
     #: Friction of cabinet and handle geoms (sliding, torsional, rolling).
     friction: tuple[float, float, float] = (1.0, 0.01, 0.0001)
     handle_condim: int = 4
+    #: Largest vertex count of a collision hull (MJCF ``maxhullvert`` on hulls whose vertex cloud is
+    #: larger). Batched simulators (MJX, MuJoCo Warp) collide convex meshes in fixed-size kernels
+    #: whose cost grows with the hull's vertices and faces; 64 leaves every procedural hull (32 at
+    #: most) as it is. -1: no cap.
+    max_hull_vertices: int = 64
     #: Decimals kept for vertex coordinates written to MJCF.
     precision: int = 6
 

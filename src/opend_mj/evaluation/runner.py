@@ -146,7 +146,7 @@ def make_episode_env(job: EpisodeJob):
     config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
     if job.physics_timestep is not None:
         config = replace(config, physics_timestep=float(job.physics_timestep))
-    return make_environment(spec_ep, config)
+    return make_environment(spec_ep, config, observations=False)  # every caller reads MjData itself
 
 
 def _run_episode(job: EpisodeJob, env=None) -> dict:

@@ -12,10 +12,12 @@ Compiled scenes are reused as `opend run` reuses them: a scene is keyed by (cabi
 appearance seed); another target of the same cabinet is set with ``Task.set_target`` and a full
 reset, which gives the same state as a scene of its own. The last ``max_scenes`` scenes are kept.
 
-Observations (``obs_mode``): ``"state"`` renders nothing; ``"rgbd"`` adds the front camera's RGB and
-depth and its intrinsics and pose. ``privileged=True`` adds ground truth (the instructed handle's
+Observations (``obs_mode``): ``"state"`` renders nothing; ``"rgb"``, ``"depth"`` and ``"rgbd"`` add
+that much of the front camera's image (``image_size`` square, e.g. 128 or 256) and its intrinsics
+and pose. ``privileged=True`` adds ground truth (the instructed handle's
 box and the open ratio) for RL from state; the benchmark's agents never get it. See the README's
-"Environments" section for the table of keys and action dimensions per hand.
+"Environments" section for the table of keys and action dimensions per hand, and docs/environments.md
+for the step's cost, the vector environment and the two success criteria.
 
 Actions (``control``): ``"delta"`` (default): ``6 + n_fingers`` numbers in [-1, 1]: root
 translation in the world frame (x 1.25 cm: the root's top speed of 0.75 m/s over one 1/60 s control
@@ -43,19 +45,15 @@ from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
 from opend_mj.language import describe_instruction  # noqa: E402
-from opend_mj.sim.hands import HandTouch, get_hand, load_spec, touch_parts  # noqa: E402
-from opend_mj.sim.rewards import (  # noqa: E402
-    REWARD_MODES,
-    DenseRewardConfig,
-    RewardProbe,
-    dense_reward,
-    sparse_reward,
-)
+from opend_mj.sim.hands import touch_parts  # noqa: E402
+from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, sparse_reward  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
+from opend_mj.sim.actions import ABSOLUTE_ROOT_HIGH, ABSOLUTE_ROOT_LOW, ActionAdapter  # noqa: E402,F401
+from opend_mj.sim.scene_reader import PROPRIO_KEYS, SceneReader  # noqa: E402,F401  (SceneReader: re-exported)
 from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
-from opend_mj.transforms import axis_angle_quat, mat_to_quat, quat_mul, turn_about_z  # noqa: E402
+from opend_mj.transforms import turn_about_z  # noqa: E402
 
-OBS_MODES = ("state", "rgbd")
+OBS_MODES = ("state", "rgb", "depth", "rgbd")
 CONTROLS = ("delta", "absolute")
 INSTRUCTION_MODES = ("onehot", "text")
 
@@ -65,16 +63,12 @@ HORIZONTAL_LABELS = ("", "left", "second left", "middle", "second right", "right
 KIND_LABELS = ("drawer", "door")
 INSTRUCTION_DIM = len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + len(KIND_LABELS)
 
-#: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state).
-PROPRIO_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", "grasp_site_pos",
-                "grasp_site_quat", "mocap_pos", "mocap_quat", "touch", "time")
+#: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state:
+#: `PROPRIO_KEYS`).
 CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
 #: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
 PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
 
-#: Root position bounds of the absolute action space (the task clips to the cabinet's bounds +- 1.5 m).
-ABSOLUTE_ROOT_LOW = (-3.0, -3.0, 0.0)
-ABSOLUTE_ROOT_HIGH = (3.0, 3.0, 3.0)
 
 
 def instruction_onehot(text: str) -> np.ndarray:
@@ -105,12 +99,18 @@ class EnvConfig:
     image_size: int = 256
     time_limit: float = 15.0  # s of simulated time (900 control steps at 60 Hz)
     physics_timestep: float | None = None  # None: TaskConfig's (1/480 s)
-    success_threshold: float = 0.2
+    success_threshold: float = 0.2  # the paper's: open ratio above it
+    #: ManiSkill3's criterion instead: success when the target opened at least this fraction of its
+    #: joint range (ManiSkill3 uses 0.75); None: the paper's open ratio above `success_threshold`
+    range_success: float | None = None
     terminate_on_success: bool = True
     room_variants: int = 8  # appearance seeds per room
     start_noise: float = 0.05  # m, per axis, around the benchmark's hand start
     start_yaw_noise: float = 0.15  # rad
     max_scenes: int = 4  # compiled scenes kept for reuse
+    #: False: step through composer and read observations the straightforward way (the reference
+    #: the default lean step is tested against, bit for bit; several times slower)
+    lean_step: bool = True
     dense: DenseRewardConfig = field(default_factory=DenseRewardConfig)
 
     def __post_init__(self):
@@ -121,6 +121,8 @@ class EnvConfig:
                 raise ValueError(f"{name} must be one of {allowed}, not {getattr(self, name)!r}")
         if not set(self.target_types) <= {"drawer", "door"} or not self.target_types:
             raise ValueError(f"target_types must name drawer and/or door, not {self.target_types!r}")
+        if self.range_success is not None and not 0.0 < self.range_success <= 1.0:
+            raise ValueError(f"range_success must be a fraction of the joint range in (0, 1], not {self.range_success}")
         if self.room_variants < 1 or self.max_scenes < 1 or self.image_size < 16:
             raise ValueError("room_variants and max_scenes must be >= 1 and image_size >= 16")
 
@@ -221,137 +223,17 @@ class StartPoseTask(OpenCabinetTask):
         return pos, quat
 
 
-class SceneReader:
-    """Reads observations (the agent's inputs, optionally ground truth) from one compiled scene.
-
-    Every value is float64 straight from MjData (what the planner's own reads give); renders only
-    when asked. ``close()`` frees the renderer.
-    """
-
-    def __init__(self, env, image_size: int):
-        self.env = env
-        self.task = task = env.task
-        physics = env.physics
-        self.physics = physics
-        self.image_size = int(image_size)
-        self._data = physics.data.ptr
-        self._qpos = np.array([int(a) for a in physics.bind(task.hand.joints).qposadr])
-        self._qvel = np.array([int(a) for a in physics.bind(task.hand.joints).dofadr])
-        self._root = physics.model.name2id(task.hand.root_body.full_identifier, "body")
-        self._site = int(physics.bind(task.hand.grasp_site).element_id)
-        self._free_dof = int(physics.bind(task.mocap.freejoint).dofadr)
-        self._mocap = task.mocap.mocap_id(physics)
-        self.probe = RewardProbe(task, physics)
-        self._touch = HandTouch(task.hand, physics)
-        self._camera = None
-
-    def proprio(self) -> dict:
-        d = self._data
-        return {
-            "hand_qpos": d.qpos[self._qpos],
-            "hand_qvel": d.qvel[self._qvel],
-            "root_pos": d.xpos[self._root].copy(),
-            "root_quat": d.xquat[self._root].copy(),
-            "root_vel": d.qvel[self._free_dof:self._free_dof + 6].copy(),
-            "grasp_site_pos": d.site_xpos[self._site].copy(),
-            "grasp_site_quat": mat_to_quat(d.site_xmat[self._site].reshape(3, 3)),
-            "mocap_pos": d.mocap_pos[self._mocap].copy(),
-            "mocap_quat": d.mocap_quat[self._mocap].copy(),
-            "touch": self._touch.vector(),
-            "time": np.array([float(d.time)]),
-        }
-
-    def camera_view(self):
-        return self.task.camera_view(self.physics)
-
-    def camera_arrays(self) -> dict:
-        view = self.camera_view()
-        pose = np.eye(4)
-        pose[:3, :3] = view.rot
-        pose[:3, 3] = view.pos
-        return {"camera_K": view.intrinsics.matrix, "camera_pose": pose}
-
-    #: The one reader per process whose renderer is open. Renderers of several models open at once
-    #: on the process's shared GL context give images that depend on which was made last (textures),
-    #: so a scene's renderer is closed when another scene renders.
-    _rendering: "SceneReader | None" = None
-
-    def render(self) -> tuple[np.ndarray, np.ndarray]:
-        if self._camera is None:
-            from opend_mj.sim.camera import RGBDCamera
-
-            other = SceneReader._rendering
-            if other is not None and other is not self:
-                other.close()
-            self._camera = RGBDCamera(self.physics, "front", self.image_size, self.image_size)
-            SceneReader._rendering = self
-        return self._camera.render()
-
-    def privileged(self) -> dict:
-        lo, hi = self.probe.handle_box()
-        return {"handle_pos": (lo + hi) / 2, "handle_size": hi - lo,
-                "open_ratio": np.array([self.task.open_ratio(self.physics)])}
-
-    def close(self) -> None:
-        if self._camera is not None:
-            self._camera.close()
-            self._camera = None
-        if SceneReader._rendering is self:
-            SceneReader._rendering = None
-
-
-class ActionAdapter:
-    """Turns a normalised delta action into the task's own action (see the module doc)."""
-
-    def __init__(self, hand: str, task_config: TaskConfig):
-        import mujoco
-
-        self.spec = load_spec(hand)
-        model = mujoco.MjModel.from_xml_path(str(get_hand(hand).xml_path))
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in self.spec.actuator_names]
-        ranges = model.actuator_ctrlrange[ids]
-        self.finger_low, self.finger_high = ranges[:, 0].copy(), ranges[:, 1].copy()
-        self.n_fingers = len(ids)
-        self.step_pos = task_config.max_root_speed / task_config.control_hz
-        self.step_rot = task_config.max_root_angular_speed / task_config.control_hz
-
-    @property
-    def delta_dim(self) -> int:
-        return 6 + self.n_fingers
-
-    @property
-    def absolute_dim(self) -> int:
-        return 7 + self.n_fingers
-
-    def absolute_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        low = np.concatenate([ABSOLUTE_ROOT_LOW, -np.ones(4), self.finger_low])
-        high = np.concatenate([ABSOLUTE_ROOT_HIGH, np.ones(4), self.finger_high])
-        return low, high
-
-    def fingers_from_unit(self, unit) -> np.ndarray:
-        u = np.clip(np.asarray(unit, float), -1.0, 1.0)
-        return self.finger_low + (u + 1.0) * 0.5 * (self.finger_high - self.finger_low)
-
-    def fingers_to_unit(self, fingers) -> np.ndarray:
-        span = np.maximum(self.finger_high - self.finger_low, 1e-12)
-        return np.clip(2.0 * (np.asarray(fingers, float) - self.finger_low) / span - 1.0, -1.0, 1.0)
-
-    def from_delta(self, action, mocap_pos, mocap_quat) -> np.ndarray:
-        a = np.clip(np.asarray(action, float), -1.0, 1.0)
-        if a.shape != (self.delta_dim,):
-            raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
-        pos = np.asarray(mocap_pos, float) + a[:3] * self.step_pos
-        rotvec = a[3:6] * self.step_rot
-        angle = float(math.sqrt(rotvec @ rotvec))
-        quat = np.asarray(mocap_quat, float)
-        if angle > 1e-12:
-            quat = quat_mul(axis_angle_quat(rotvec / angle, angle), quat)
-            quat = quat / np.linalg.norm(quat)
-        return np.concatenate([pos, quat, self.fingers_from_unit(a[6:])])
-
-
 class OpenDCore:
-    """The engine of the environments over the dataset: sampling, scenes, observations, rewards."""
+    """The engine of the environments over the dataset: sampling, scenes, observations, rewards.
+
+    The step (``lean_step=True``, the default) calls the task's own action handling and its tight
+    substep loop directly (no composer hooks, no observation buffers), brings only body, geom and
+    site poses up to date when nothing renders, and writes every float observation into one
+    preallocated vector through indices bound once per scene (`SceneReader.fill`); the observation
+    dict holds views into one copy of that vector in the dtype asked for. ``lean_step=False`` steps
+    through composer's ``Environment.step`` and reads each observation the straightforward way: the
+    reference the lean step is tested against, to the bit.
+    """
 
     def __init__(self, config: EnvConfig):
         self.config = config
@@ -365,10 +247,32 @@ class OpenDCore:
         self._needs_reset = True
         self.steps = 0
         self.scenes_built = 0
+        layout = self.observation_layout()
+        self._float_keys: list[tuple[str, slice, tuple[int, ...]]] = []
+        offset = 0
+        for key, (shape, kind) in layout.items():
+            if kind == "float" and key != "depth":
+                size = int(np.prod(shape, dtype=int))
+                self._float_keys.append((key, slice(offset, offset + size), shape))
+                offset += size
+        self._slices = {key: sl for key, sl, _ in self._float_keys}
+        #: every float observation but depth, float64, at the offsets of `_slices`
+        self._flat = np.zeros(offset)
+        self._rgb = config.obs_mode in ("rgb", "rgbd")
+        self._depth = config.obs_mode in ("depth", "rgbd")
 
     @property
     def control_dt(self) -> float:
         return 1.0 / self.task_config.control_hz
+
+    @property
+    def flat_size(self) -> int:
+        """Length of the float observation vector (`flat_layout`)."""
+        return len(self._flat)
+
+    def flat_layout(self) -> list[tuple[str, slice, tuple[int, ...]]]:
+        """(key, slice of the float vector, shape) of every float observation but depth."""
+        return list(self._float_keys)
 
     # ------------------------------------------------------------------ scenes
     def _scene(self, episode: SampledEpisode) -> SceneReader:
@@ -387,12 +291,13 @@ class OpenDCore:
         env = OpenDEnvironment(task, time_limit=self.task_config.time_limit, random_state=episode.scene_seed,
                                strip_singleton_obs_buffer_dim=True, raise_exception_on_physics_error=False)
         scene = SceneReader(env, self.config.image_size)
+        scene.bind_layout(self._slices)
         self._scenes[key] = scene
         self.scenes_built += 1
         return scene
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: int, options: dict | None = None) -> tuple[dict, dict]:
+    def reset(self, seed: int, options: dict | None = None, dtype=np.float64) -> tuple[dict, dict]:
         episode = self.sampler.fixed(seed, options) if options else self.sampler.sample(seed)
         scene = self._scene(episode)
         task = scene.task
@@ -404,9 +309,16 @@ class OpenDCore:
         self.scene, self.episode = scene, episode
         self._needs_reset = False
         self.steps = 0
-        terms = scene.probe.terms()
+        flat, sl = self._flat, self._slices
+        flat[:] = 0.0
+        if self.config.instruction == "onehot":
+            flat[sl["instruction"]] = instruction_onehot(episode.instruction)
+        if self.config.obs_mode != "state":
+            for key, value in scene.camera_arrays().items():
+                flat[sl[key]] = value.ravel()
+        terms = self._judge(scene.probe.terms() if not self.config.lean_step else scene.fill(flat, self.config.privileged))
         dense_reward(terms, self.config.success_threshold, self.config.dense)  # fills reach / open / others
-        return self.observe(), self._info(terms)
+        return self.observe(dtype, filled=self.config.lean_step), self._info(terms)
 
     def native_action(self, action) -> np.ndarray:
         """The task's own action for ``action`` in this environment's control mode."""
@@ -414,22 +326,40 @@ class OpenDCore:
             return np.asarray(action, dtype=np.float64)
         d = self.scene._data
         mid = self.scene._mocap
+        if not self.config.lean_step:
+            return self.adapter.from_delta_reference(action, d.mocap_pos[mid], d.mocap_quat[mid])
         return self.adapter.from_delta(action, d.mocap_pos[mid], d.mocap_quat[mid])
 
-    def step(self, action) -> tuple[dict, float, bool, bool, dict]:
+    def step(self, action, dtype=np.float64, observe: bool = True) -> tuple[dict | None, float, bool, bool, dict]:
+        """One control step: (observation, reward, terminated, truncated, info); float observations
+        in ``dtype`` (rgb stays uint8, depth float32). ``observe=False`` returns None for the
+        observation: the caller reads the float vector (`flat`) and `images` itself."""
         if self._needs_reset:
             raise RuntimeError("the episode is over (or never started): call reset() first")
         scene = self.scene
-        ts = scene.env.step(self.native_action(action))
+        task = scene.task
+        if self.config.lean_step:
+            task.before_step(scene.physics, self.native_action(action), None)
+            warnings = task.fast_substeps(scene.physics, cameras=self.config.obs_mode != "state")
+            data = scene._data
+            if not warnings and not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all():
+                warnings = ["NaN"]
+            if warnings:
+                task.physics_warnings.append({"time": float(data.time), "warnings": warnings})
+            last = bool(data.time >= self.task_config.time_limit)
+            terms = scene.fill(self._flat, self.config.privileged)
+        else:
+            last = scene.env.step(self.native_action(action)).last()
+            terms = scene.probe.terms()
+        terms = self._judge(terms)
         self.steps += 1
-        warnings = list(scene.task.physics_warnings)
-        terms = scene.probe.terms()
+        warnings = list(task.physics_warnings)
         if warnings:
             reward, terminated, truncated = 0.0, True, False
         else:
             reward = self._reward(terms)
             terminated = bool(terms.success and self.config.terminate_on_success)
-            truncated = bool(ts.last()) and not terminated
+            truncated = last and not terminated
         if terminated or truncated:
             self._needs_reset = True
         if self.config.reward_mode == "sparse":
@@ -437,7 +367,14 @@ class OpenDCore:
         info = self._info(terms)
         if warnings:
             info["physics_warnings"] = warnings
-        return self.observe(), reward, terminated, truncated, info
+        obs = self.observe(dtype, filled=self.config.lean_step) if observe else None
+        return obs, reward, terminated, truncated, info
+
+    def _judge(self, terms):
+        """Success by this environment's criterion (the paper's is the probe's own)."""
+        if self.config.range_success is not None:
+            terms.success = bool(terms.range_ratio >= self.config.range_success)
+        return terms
 
     def _reward(self, terms) -> float:
         if self.config.reward_mode == "sparse":
@@ -451,21 +388,49 @@ class OpenDCore:
                 "target": ep.joint, "target_type": ep.target_type, "room": ep.room, "episode_seed": ep.seed,
                 "sim_time": float(self.scene._data.time), "reward_terms": terms.to_dict()}
 
-    def observe(self) -> dict:
-        """This environment's observation (float64 arrays; the gym wrapper casts them)."""
+    def observe(self, dtype=np.float64, filled: bool = False) -> dict:
+        """This environment's observation: float arrays in ``dtype``, rgb uint8, depth float32.
+
+        ``filled``: the float vector already holds this state (`SceneReader.fill` ran since the last
+        physics change); otherwise the observation is read the straightforward way.
+        """
         c, scene = self.config, self.scene
-        obs = scene.proprio()
-        obs["instruction"] = self.episode.instruction if c.instruction == "text" else instruction_onehot(
-            self.episode.instruction)
-        if c.obs_mode == "rgbd":
-            obs["rgb"], obs["depth"] = scene.render()
-            obs.update(scene.camera_arrays())
-        if c.privileged:
-            obs.update(scene.privileged())
+        if filled:
+            flat = self._flat.astype(dtype)
+            obs = {key: flat[sl].reshape(shape) for key, sl, shape in self._float_keys}
+        else:
+            obs = {key: np.asarray(v, dtype=dtype) for key, v in scene.proprio().items()}
+            if c.instruction == "onehot":
+                obs["instruction"] = instruction_onehot(self.episode.instruction).astype(dtype)
+            if c.obs_mode != "state":
+                obs.update({k: v.astype(dtype) for k, v in scene.camera_arrays().items()})
+            if c.privileged:
+                obs.update({k: np.asarray(v, dtype=dtype) for k, v in scene.privileged().items()})
+        if c.instruction == "text":
+            obs["instruction"] = self.episode.instruction
+        obs.update(self.images())
         return obs
 
+    @property
+    def flat(self) -> np.ndarray:
+        """The float observation vector of the current state (float64, `flat_layout`; lean step only:
+        valid after `reset` and `step`). Read-only to callers."""
+        return self._flat
+
+    def images(self) -> dict[str, np.ndarray]:
+        """What the observation mode renders, now: rgb (uint8 HxWx3) and/or depth (float32 HxW, m)."""
+        mode, scene = self.config.obs_mode, self.scene
+        if mode == "rgbd":
+            rgb, depth = scene.render()
+            return {"rgb": rgb, "depth": depth}
+        if mode == "rgb":
+            return {"rgb": scene.render_rgb()}
+        if mode == "depth":
+            return {"depth": scene.render_depth()}
+        return {}
+
     def render(self) -> np.ndarray:
-        return self.scene.render()[0] if self.scene is not None else None
+        return self.scene.render_rgb() if self.scene is not None else None
 
     def close(self) -> None:
         for scene in self._scenes.values():
@@ -484,9 +449,12 @@ class OpenDCore:
                   "grasp_site_quat": ((4,), "float"), "mocap_pos": ((3,), "float"), "mocap_quat": ((4,), "float"),
                   "touch": ((len(touch_parts(self.spec)),), "float"), "time": ((1,), "float")}
         layout["instruction"] = ((), "text") if self.config.instruction == "text" else ((INSTRUCTION_DIM,), "float")
-        if self.config.obs_mode == "rgbd":
-            layout.update({"rgb": ((size, size, 3), "uint8"), "depth": ((size, size), "float"),
-                           "camera_K": ((3, 3), "float"), "camera_pose": ((4, 4), "float")})
+        if self.config.obs_mode in ("rgb", "rgbd"):
+            layout["rgb"] = ((size, size, 3), "uint8")
+        if self.config.obs_mode in ("depth", "rgbd"):
+            layout["depth"] = ((size, size), "float")
+        if self.config.obs_mode != "state":
+            layout.update({"camera_K": ((3, 3), "float"), "camera_pose": ((4, 4), "float")})
         if self.config.privileged:
             layout.update({"handle_pos": ((3,), "float"), "handle_size": ((3,), "float"),
                            "open_ratio": ((1,), "float")})

@@ -12,8 +12,7 @@ action are)::
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["success"], info["open_ratio"], info["others_moved"]
 
-    envs = gym.make_vec("opend/OpenCabinet-v0", num_envs=4, vectorization_mode="async",
-                        vector_kwargs={"context": "spawn"}, cabinets="cabinets")
+    envs = gym.make_vec("opend/OpenCabinet-v0", num_envs=2, cabinets="cabinets")  # shared-memory workers
 
 ``opend/OpenDrawer-v0`` and ``opend/OpenDoor-v0`` sample drawers or doors only. Without importing
 this module first, ``gym.make("opend_mj.sim.gym_env:opend/OpenCabinet-v0", ...)`` imports it.
@@ -36,6 +35,7 @@ import dataclasses
 import gymnasium as gym
 import numpy as np
 
+from opend_mj.sim.spaces import action_space, observation_space
 from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment
 
 _ARRAY_KEYS = ("rgb", "depth", "hand_joint_pos", "root_pos", "root_quat")
@@ -62,34 +62,23 @@ class OpenCabinetEnv(gym.Env):
 
         self.render_mode = render_mode
         self.core = OpenDCore(make_config(**kwargs))
-        spaces = {}
-        for key, (shape, kind) in self.core.observation_layout().items():
-            if kind == "text":
-                spaces[key] = gym.spaces.Text(max_length=128, charset=_CHARSET)
-            elif kind == "uint8":
-                spaces[key] = gym.spaces.Box(0, 255, shape, np.uint8)
-            else:
-                spaces[key] = gym.spaces.Box(*_bounds(key), shape, np.float32)
-        self.observation_space = gym.spaces.Dict(spaces)
-        low, high = self.core.action_bounds()
-        self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self.observation_space = observation_space(self.core)
+        self.action_space = action_space(self.core)
         self.action_names = self.core.action_names()
 
     def _obs(self, raw: dict) -> dict:
-        out = {}
-        for key, space in self.observation_space.spaces.items():
-            value = raw[key]
-            out[key] = value if isinstance(space, gym.spaces.Text) else np.asarray(value, dtype=space.dtype)
-        return out
+        """The core's observation in the spaces' dtypes and key order (the core already gives float32
+        views of one vector, rgb uint8 and depth float32; this only orders the keys)."""
+        return {key: raw[key] for key in self.observation_space.spaces}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         episode_seed = int(seed) if seed is not None else int(self.np_random.integers(2**31 - 1))
-        obs, info = self.core.reset(episode_seed, options)
+        obs, info = self.core.reset(episode_seed, options, dtype=np.float32)
         return self._obs(obs), info
 
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.core.step(np.asarray(action, dtype=np.float64))
+        obs, reward, terminated, truncated, info = self.core.step(action, dtype=np.float32)
         return self._obs(obs), float(reward), terminated, truncated, info
 
     def render(self):
@@ -99,26 +88,12 @@ class OpenCabinetEnv(gym.Env):
         self.core.close()
 
 
-def _bounds(key: str) -> tuple[float, float]:
-    """Bounds of a float observation: unit for quaternions and codes, else wide (never reached)."""
-    if key.endswith("_quat"):
-        return -1.0, 1.0
-    if key in ("instruction", "open_ratio"):
-        return 0.0, 1.0
-    if key in ("depth", "time", "handle_size"):
-        return 0.0, _WIDE
-    return -_WIDE, _WIDE
-
-
-_WIDE = 1.0e4
-_CHARSET = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 ,.'-"
-
-
 def register_envs() -> None:
     """Register the ids of `ENV_IDS` with gymnasium (done on import; repeated calls are no-ops)."""
     for env_id, kwargs in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="opend_mj.sim.gym_env:OpenCabinetEnv", kwargs=dict(kwargs))
+            gym.register(id=env_id, entry_point="opend_mj.sim.gym_env:OpenCabinetEnv",
+                         vector_entry_point="opend_mj.sim.vector_env:OpenDVectorEnv", kwargs=dict(kwargs))
 
 
 register_envs()

@@ -381,9 +381,21 @@ class HandTouch:
         hand_bodies = {int(b) for b in physics.bind(model.find_all("body")).element_id}
         self._hand_geom = np.isin(self._m.geom_bodyid, list(hand_bodies))
         self._force6 = np.zeros(6)
+        #: part index of each geom of the model (the last part, "other", for geoms without a sensor)
+        self._part_of_geom = np.full(self._m.ngeom, len(self.parts) - 1, dtype=np.intp)
+        for geom, part in self._geom_part.items():
+            self._part_of_geom[geom] = part
+        #: With elliptic cones (or frictionless contacts only) a contact's normal force is its first
+        #: constraint force, which is what mj_contactForce copies: `vector_from` reads it for all
+        #: contacts at once. Pyramidal cones decode the force from the pyramid's edges: `vector`.
+        self._elliptic = int(self._m.opt.cone) == int(mujoco.mjtCone.mjCONE_ELLIPTIC)
 
     def vector(self) -> np.ndarray:
         """Force per part, in `parts` order (0: the part touches nothing)."""
+        return self.vector_from(self._d.contact)
+
+    def vector_reference(self) -> np.ndarray:
+        """`vector` one contact at a time through ``mj_contactForce`` (the reference; any cone)."""
         m, d = self._m, self._d
         force = np.zeros(len(self.parts))
         other = len(self.parts) - 1
@@ -396,6 +408,24 @@ class HandTouch:
             self._mj_contact_force(m, d, i, self._force6)
             force[self._geom_part.get(g1 if h1 else g2, other)] += abs(float(self._force6[0]))
         return force
+
+    def vector_from(self, contact) -> np.ndarray:
+        """`vector` from the step's contact list (``data.contact``, read once by the caller), without
+        a Python loop over contacts: the same forces, summed per part in contact order (bincount adds
+        in index order, as the loop does), so the same numbers to the bit."""
+        if not len(contact.geom1):
+            return np.zeros(len(self.parts))
+        if not self._elliptic and int(np.max(contact.dim)) > 1:
+            return self.vector_reference()
+        g1, g2, adr = contact.geom1, contact.geom2, contact.efc_address
+        h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
+        mixed = h1 != h2
+        if not mixed.any():
+            return np.zeros(len(self.parts))
+        adr = adr[mixed]
+        force = np.where(adr >= 0, self._d.efc_force[np.maximum(adr, 0)], 0.0)
+        parts = self._part_of_geom[np.where(h1[mixed], g1[mixed], g2[mixed])]
+        return np.bincount(parts, weights=np.abs(force), minlength=len(self.parts))
 
     def read(self) -> dict[str, float]:
         """Force per part that feels any, by part name (what the planner and agents read)."""

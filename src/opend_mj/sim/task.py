@@ -276,15 +276,18 @@ class OpenCabinetTask(composer.Task):
         if self._path_quat is not None:
             physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
 
-    def fast_substeps(self, physics) -> list[str]:
+    def fast_substeps(self, physics, cameras: bool = True) -> list[str]:
         """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
 
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
         composer's per-substep Python hooks; where the mocap does not move, the substeps are one
         ``mj_step(model, data, n)`` call. Afterwards the kinematics (bodies, sites, geoms, cameras,
         lights) are brought up to date with the new state, so that readers see where things are;
-        this does not change the trajectory (each ``mj_step`` recomputes them first). Returns the
-        names of MuJoCo instability warnings raised in this control step.
+        this does not change the trajectory (each ``mj_step`` recomputes them first). With
+        ``cameras=False`` only body, geom and site poses are brought up to date (``mj_kinematics``),
+        not centre-of-mass quantities, cameras or lights: for readers that render nothing and read
+        no camera (the state-only environments). Returns the names of MuJoCo instability warnings
+        raised in this control step.
         """
         model, data = physics.model.ptr, physics.data.ptr
         stats = self._warning_stats(data)
@@ -301,8 +304,9 @@ class OpenCabinetTask(composer.Task):
                     mocap_quat[mid] = path_quat[i]
                 _mujoco.mj_step(model, data)
         _mujoco.mj_kinematics(model, data)
-        _mujoco.mj_comPos(model, data)
-        _mujoco.mj_camlight(model, data)
+        if cameras:
+            _mujoco.mj_comPos(model, data)
+            _mujoco.mj_camlight(model, data)
         return [_WARNING_NAMES[i] for i, (w, n) in enumerate(zip(stats, before)) if w.number > n]
 
     def _warning_stats(self, data) -> list:
@@ -399,14 +403,18 @@ class OpenDEnvironment(composer.Environment):
     `OpenCabinetTask.fast_substeps` gives the same trajectory as composer's loop, several times
     faster. Where every enabled observable is read once per control step with no buffer, delay or
     aggregator (the task's own observables are), observations are read directly instead of through
-    composer's observation buffers; the values are the same. The MJCF never changes between episodes
+    composer's observation buffers; the values are the same. With ``observations=False`` those
+    plain reads are skipped and ``step`` returns an empty observation. The MJCF never changes between episodes
     of one task, so a reset does not recompile it. MuJoCo instability warnings are recorded in
     `task.physics_warnings` and end the episode.
     """
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, observations: bool = True, **kwargs):
         kwargs.setdefault("recompile_mjcf_every_episode", False)
         super().__init__(*args, **kwargs)
+        #: False: ``step`` returns an empty observation (for callers that read MjData themselves,
+        #: as the planner does: five observables read and copied per control step for nothing)
+        self._step_observations = bool(observations)
         # The constructor has just compiled the model and nothing changes it per episode.
         self._mjcf_never_compiled = self._recompile_mjcf_every_episode
         self._plain_readers = None
@@ -434,7 +442,7 @@ class OpenDEnvironment(composer.Environment):
             self._reset_next_step = False
             return self.reset()
         task, physics, proxy = self._task, self._physics, self._physics_proxy
-        readers = self._plain_readers
+        readers = self._plain_readers if self._step_observations or self._plain_readers is None else ()
         self._hooks.before_step(proxy, action, self._random_state)
         if readers is None:
             updater = self._observation_updater
@@ -492,8 +500,13 @@ def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
     return np.array(rows)
 
 
-def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True):
-    """A dm_control composer Environment for one episode (time limit from the config)."""
+def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,
+                     observations: bool = True):
+    """A dm_control composer Environment for one episode (time limit from the config).
+
+    ``observations=False``: ``step`` returns no observation (see `OpenDEnvironment`); ``reset``
+    still does."""
     task = OpenCabinetTask(episode, config)
     return OpenDEnvironment(task, time_limit=config.time_limit, random_state=episode.seed,
-                                strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False)
+                            strip_singleton_obs_buffer_dim=strip_singleton, raise_exception_on_physics_error=False,
+                            observations=observations)
