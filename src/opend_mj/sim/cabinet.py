@@ -106,6 +106,21 @@ class Cabinet(composer.Entity):
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(self.info["bounds"]["min"]), np.asarray(self.info["bounds"]["max"])
 
+    def moving_bodies(self) -> list:
+        """MJCF bodies that move: every body with a joint, and the bodies below it."""
+        out = []
+
+        def walk(body, moving: bool) -> None:
+            moving = moving or bool(body.find_all("joint", immediate_children_only=True))
+            if moving:
+                out.append(body)
+            for child in body.find_all("body", immediate_children_only=True):
+                walk(child, moving)
+
+        for top in self._mjcf_root.worldbody.find_all("body", immediate_children_only=True):
+            walk(top, False)
+        return out
+
     def target(self, joint: str) -> Target:
         for t in self.targets:
             if t.joint == joint:
