@@ -914,8 +914,12 @@ class RoomArena(composer.Arena):
         the cabinet's moving bodies, as real fronts hang a few millimetres clear of the floor; every
         other contact, the hand's with the floor included, is kept). See docs/cabinets.md.
         """
+        from .cabinet import moving_bodies
+
         frame = self.attach(cabinet_entity, self._cabinet_site)
-        for body in cabinet_entity.moving_bodies():
+        bodies = (cabinet_entity.moving_bodies() if hasattr(cabinet_entity, "moving_bodies")
+                  else moving_bodies(cabinet_entity.mjcf_model))
+        for body in bodies:
             self._mjcf_root.contact.add("exclude", body1="world", body2=body)
         return frame
 
