@@ -95,7 +95,7 @@ class GeneratorConfig:
     #: the bottom panel, a low plinth in ``low_plinth_range``, a plinth or legs in ``plinth_range``).
     #: Matched to the real OpenD training cabinets' lowest moving part above the floor (the feasibility
     #: check's figure, 133 cabinets): 18 % within 5 mm, 16 % 0.5-5 cm, 4 % 5-10 cm, 62 % 10-22 cm.
-    #: Drawn from a random stream of its own, so the rest of a cabinet is drawn as in version 3.
+    #: Drawn from a random stream of its own (the draws before the layout are version 3's).
     base_shares: tuple[float, float, float, float] = (0.18, 0.16, 0.05, 0.61)
     low_plinth_range: tuple[float, float] = (0.03, 0.08)
     plinth_range: tuple[float, float] = (0.08, 0.18)
@@ -847,8 +847,8 @@ def generate_source(index: int, seed: int, out_root: Path, config: GeneratorConf
     objs.mkdir(parents=True, exist_ok=True)
 
     t = float(rng.uniform(*cfg.thickness_range))
-    if rng.random() < 0.35:  # version 3 drew its plinth here: the draws stay, so that the rest of a
-        rng.uniform(0.05, 0.1)  # cabinet is drawn as before; the base has a random stream of its own
+    if rng.random() < 0.35:  # version 3 drew its plinth here: the draws stay, so that the layout's draws
+        rng.uniform(0.05, 0.1)  # start where they did; the base has a random stream of its own
     base, plinth = _draw_base(np.random.default_rng([seed, index, 4]), cfg)
     layout = _sample_layout(rng, cfg, t, plinth)
     body = _pick_colour(rng)
