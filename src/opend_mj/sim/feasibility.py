@@ -31,6 +31,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
@@ -86,7 +87,8 @@ class TargetFeasibility:
     #: touched while below `reach` (names without the `cabinet/` prefix).
     room_contacts: list[str] = field(default_factory=list)
     cabinet_contacts: list[str] = field(default_factory=list)
-    #: Lowest point of the moving part's collision geometry over the push (m above the floor).
+    #: Lowest point of the moving part's collision geometry (m above the floor) from closed until it
+    #: reached `reach` of its range (the whole push if it never did).
     min_clearance: float = float("nan")
     reason: str | None = None
     message: str | None = None
@@ -118,9 +120,9 @@ def _geom_lowest(physics, geoms: np.ndarray) -> float:
     low = np.inf
     for g in geoms:
         R = d.geom_xmat[g].reshape(3, 3)
-        if int(m.geom_type[g]) == 6:  # box
+        if int(m.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_BOX):
             low = min(low, float(d.geom_xpos[g, 2] - np.abs(R[2]) @ m.geom_size[g]))
-        elif int(m.geom_type[g]) == 7:  # mesh
+        elif int(m.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_MESH):
             mid = int(m.geom_dataid[g])
             a, n = int(m.mesh_vertadr[mid]), int(m.mesh_vertnum[mid])
             low = min(low, float(d.geom_xpos[g, 2] + (m.mesh_vert[a:a + n] @ R.T)[:, 2].min()))
