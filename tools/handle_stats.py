@@ -5,7 +5,8 @@
 For every cabinet: one front RGB-D image; for every target its handle box (ground truth), the handle
 estimated and measured from depth (bar thickness, length, stand-off gap, protrusion, knob size, free
 space to the nearest neighbour), its height above the floor, the distance between neighbouring handle
-centres, and the doors / drawers per cabinet. Prints quantiles per dataset side by side (markdown),
+centres, the doors / drawers per cabinet, and (from the build's feasibility report) how high the lowest
+moving part of each cabinet stands above the floor. Prints quantiles per dataset side by side (markdown),
 so a real dataset and the procedural one can be compared.
 """
 
@@ -35,7 +36,8 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
         "bar thickness (mm)", "bar length (mm)", "stand-off gap (mm)", "protrusion (mm)", "knob size (mm)",
         "handle height (m)", "nearest handle edge (mm)", "doors per cabinet", "drawers per cabinet",
         "knobs (share)", "door handles that are horizontal bars (share)",
-        "of those, along the door's top or bottom edge (share)", "of those, centred across the door (share)")}
+        "of those, along the door's top or bottom edge (share)", "of those, centred across the door (share)",
+        "lowest moving part above the floor (m)", "cabinets with a front within 5 mm of the floor (share)")}
     for cab in cabinets:
         first = cab["targets"][0]["joint"]
         env = make_environment(EpisodeSpec(cabinets_dir / cab["path"], first, hand="franka", seed=0),
@@ -72,7 +74,13 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
             out["protrusion (mm)"].append(1000 * shape.protrusion)
             out["handle height (m)"].append(float(centres[t.joint][2]))
             out["nearest handle edge (mm)"].append(1000 * min(shape.clear.values()))
-        for t in load_cabinet_info(cabinets_dir / cab["path"])["targets"]:  # door bars' placement, from the build
+        info = load_cabinet_info(cabinets_dir / cab["path"])
+        report = info.get("feasibility")  # the build's feasibility check: each part's lowest point as it opens
+        if report and report.get("targets"):
+            low = min(t["min_clearance"] for t in report["targets"] if t.get("min_clearance") is not None)
+            out["lowest moving part above the floor (m)"].append(low)
+            out["cabinets with a front within 5 mm of the floor (share)"].append(float(low < 0.005))
+        for t in info["targets"]:  # door bars' placement, from the build
             if t["type"] != "door" or "part_box_min" not in t:
                 continue
             horizontal = t["handle"]["orientation"] == "horizontal"

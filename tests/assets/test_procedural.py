@@ -247,7 +247,7 @@ def test_handle_dimensions(sources):
                 assert ext[0] <= 2 * cfg.knob_cap_radius_range[1] + 1e-3 or ext[0] <= (phi - plo)[0]
                 assert 0.028 <= proud <= 0.05
             else:
-                # bars as thin and as close to their panel as real ones (5-17 mm on 8-38 mm stand-offs)
+                # bars as thin and as close to their panel as real ones (5-21 mm on 8-38 mm stand-offs)
                 gap_lo, gap_hi = cfg.bar_gap_range
                 d_lo, d_hi = cfg.bar_diameter_range
                 assert gap_lo + d_lo - 1e-3 <= proud <= gap_hi + d_hi + 1e-3, ext
@@ -258,7 +258,7 @@ def test_handle_dimensions(sources):
                 assert any(p[1][2] - phi[2] >= gap_lo - 5e-4 for p in hp), "no grip piece at the standoff"
             # the handle lies within its panel's outline
             assert np.all(lo[:2] >= plo[:2] - 1e-4) and np.all(hi[:2] <= phi[:2] + 1e-4)
-            assert lo[2] >= phi[2] - 0.005  # slanted legs may sink a few mm into their own panel
+            assert lo[2] >= phi[2] - 0.006  # slanted legs (of bars up to 21 mm thick) sink a few mm into their panel
 
 
 def test_closed_cabinet_clearances(sources):

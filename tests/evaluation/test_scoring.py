@@ -39,7 +39,8 @@ def test_score_command_csv_and_plot(tmp_path):
     assert res.exit_code == 0, res.output
     assert "## Failure stages" in res.output
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
-    assert len(rows) == 3 * 2 * 2 * 3  # thresholds x hands x splits x kinds
+    assert len(rows) == (3 + 1) * 2 * 2 * 3  # (open-ratio thresholds + range) x hands x splits x kinds
+    assert {r["measure"] for r in rows} == {"open_ratio", "range"}
     row = [r for r in rows if r["hand"] == "allegro" and r["threshold"] == "0.2" and r["split"] == "test"
            and r["kind"] == "overall"][0]
     assert (row["successes"], row["episodes"], row["success_rate"]) == ("3", "4", "0.7500")
@@ -81,3 +82,38 @@ def test_handles_given_up_by_their_kind_are_counted():
     md = report_markdown(records)
     assert "| shadow | cliport | test | 3 | 2 | 1 |" in md
     assert "given up" not in report_markdown([records[2]])
+
+
+def _rec(joint, **kw):
+    return dict(cabinet="c", joint=joint, hand="h", solver="s", split="test", seed=0, light_scale=1.0, pull="arc",
+                target_type="door", **kw)
+
+
+def test_range_column_from_range_ratio_or_raw_joint_value():
+    """ManiSkill3's criterion (>= 75 % of the joint range) beside the paper's 20 %: read from range_ratio,
+    else computed from the raw joint value and range (a door closed at its upper limit opens downward)."""
+    from opend_mj.evaluation.scoring import range_fraction, ranking, report_markdown, success_table
+
+    recs = [_rec("a", open_ratio=0.45, range_ratio=0.9, success=True),
+            _rec("b", open_ratio=0.30, range_ratio=0.6, success=True),
+            _rec("c", open_ratio=0.40, joint_value=-1.2, joint_range=[-1.5, 0.0], success=True),
+            _rec("d", open_ratio=None, range_ratio=None, joint_value=None, success=False, failed_stage="physics")]
+    assert abs(range_fraction(recs[2]) - 0.8) < 1e-9
+    assert range_fraction(recs[3]) == 0.0
+    row = success_table(recs, 0.75, "range")[0]
+    assert row["test_overall"] == (0.5, 2, 4)
+    assert success_table(recs)[0]["test_overall"][1:] == (3, 4)
+    top = ranking(recs)[0]
+    assert top["test_overall_range"] == (0.5, 2, 4)
+    md = report_markdown(recs)
+    assert "joint at >= 75 % of its range (ManiSkill3)" in md
+    assert "| 1 | s | h | 75.0 (3/4) | 50.0 (2/4) |" in md
+
+
+def test_range_column_is_na_for_records_without_the_range():
+    """A record written before the range was recorded: n/a, not a guess."""
+    from opend_mj.evaluation.scoring import range_fraction, report_markdown
+
+    old = [_rec("a", open_ratio=0.45, success=True), _rec("b", open_ratio=0.1, success=False)]
+    assert range_fraction(old[0]) is None
+    assert "| 1 | s | h | 50.0 (1/2) | n/a |" in report_markdown(old)

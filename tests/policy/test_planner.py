@@ -403,7 +403,12 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     from opend_mj.evaluation.runner import run_episode
     from opend_mj.policy.solvers import register_solver
 
-    src = generate_source(67, 0, tmp_path / "src")
+    from opend_mj.assets.procedural import GeneratorConfig
+
+    # generator version 3's proc_0067 (fronts inset above the floor, bars up to 17 mm), whose doors and
+    # drawer this scenario was written for
+    v3 = GeneratorConfig(base_shares=(0.0, 1.0, 0.0, 0.0), bar_diameter_range=(0.005, 0.017))
+    src = generate_source(67, 0, tmp_path / "src", v3)
     compile_cabinet(src, tmp_path / "built", cache_dir=tmp_path / "cache")
     cab = tmp_path / "built" / "proc_0067"
 

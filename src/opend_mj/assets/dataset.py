@@ -1,13 +1,18 @@
 """The dataset stage: compile many sources in parallel, filter, split, and write the manifest.
 
 `cabinets/manifest.json` lists every built cabinet with its split and targets (joint, type,
-instruction), and every rejected source with its reason, so that each later stage (task, training
-data, evaluation) reads one file.
+instruction), every rejected source with its reason, and every target excluded by the feasibility
+check with its reason, so that each later stage (task, training data, evaluation) reads one file.
+
+The feasibility check (`opend_mj.sim.feasibility.RoomCheck`, passed in as ``check`` because the
+room lives in a higher layer) pushes each target open with the cabinet standing in a room; its
+report is stored in `cabinet.json["feasibility"]` and reused while its key matches.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import time
 from pathlib import Path
@@ -16,7 +21,7 @@ from tqdm import tqdm
 
 from opend_mj.assets.compiler import CompileResult, compile_cabinet
 from opend_mj.assets.config import CompilerConfig, DatasetConfig
-from opend_mj.assets.layout import Manifest
+from opend_mj.assets.layout import CABINET_JSON, Manifest
 from opend_mj.language import LanguageConfig
 
 
@@ -36,12 +41,37 @@ def format_split_table(table: dict[str, dict[str, int]]) -> str:
 
 
 def _compile_job(args) -> CompileResult:
-    source_dir, out_root, config, language, cache_dir, force = args
+    source_dir, out_root, config, language, cache_dir, force, check = args
     try:
-        return compile_cabinet(source_dir, out_root, config, language, cache_dir, force)
+        result = compile_cabinet(source_dir, out_root, config, language, cache_dir, force)
     except Exception as exc:  # a bug must not lose the rest of the build: report it as a rejection
         return CompileResult(Path(source_dir).name, "rejected", "compiler_error",
                              f"{source_dir}: unexpected {type(exc).__name__}: {exc}")
+    if check is None or result.status == "rejected":
+        return result
+    return _feasibility(result, Path(out_root) / result.id, check)
+
+
+def _feasibility(result: CompileResult, cabinet_dir: Path, check) -> CompileResult:
+    """Run `check` on a built cabinet (or reuse its stored report) and store it in cabinet.json."""
+    stored = result.info.get("feasibility")
+    if isinstance(stored, dict) and stored.get("key") == check.key:
+        return result
+    try:
+        report = check(cabinet_dir)
+    except Exception as exc:  # the cabinet does not load or step in a room
+        return CompileResult(result.id, "rejected", "physics_error",
+                             f"{cabinet_dir}: feasibility check failed ({type(exc).__name__}: {exc})")
+    result.info["feasibility"] = report
+    info_path = cabinet_dir / CABINET_JSON
+    info_path.write_text(json.dumps(result.info, indent=1) + "\n")
+    return result
+
+
+def excluded_targets(info: dict) -> dict[str, dict]:
+    """Targets of a cabinet.json that its feasibility report excludes: joint -> record."""
+    report = info.get("feasibility") or {}
+    return {t["joint"]: t for t in report.get("targets", []) if not t.get("feasible", True)}
 
 
 def list_sources(source_root: Path, ids: list[str] | None = None) -> list[Path]:
@@ -73,12 +103,17 @@ def build_dataset(
     backend: str = "local",
     address: str | None = None,
     cache_dir: Path | None = None,
+    check=None,
 ) -> Manifest:
     """Compile every source (in parallel), then split the valid ones and write the manifest.
 
     ``backend``: ``"local"`` (a spawn process pool of ``workers``, or this process for one worker) or
     ``"ray"`` (``address`` of a cluster sharing this file system, or a local Ray instance); see
     `opend_mj.backends`. Results come back to this process, which alone writes the manifest.
+
+    ``check``: the feasibility check (`opend_mj.sim.feasibility.RoomCheck`), or None for none.
+    Targets it finds infeasible leave the manifest for `excluded_targets` (with their reason); a
+    cabinet left with no target is rejected (reason ``infeasible``).
     """
     from opend_mj.backends import make_executor
 
@@ -88,7 +123,7 @@ def build_dataset(
 
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     workers = max(1, workers or os.cpu_count() or 1)
-    jobs = [(Path(s), out_root, config, language, cache_dir, force) for s in source_dirs]
+    jobs = [(Path(s), out_root, config, language, cache_dir, force, check) for s in source_dirs]
     results: list[CompileResult] = []
     start = time.perf_counter()
     bar = tqdm(total=len(jobs), desc="build-assets", unit="cab", disable=not progress, dynamic_ncols=True)
@@ -114,6 +149,16 @@ def build_dataset(
 
     order = {Path(s).name: k for k, s in enumerate(source_dirs)}
     results.sort(key=lambda r: order.get(r.id, 0))
+    excluded: list[dict] = []
+    for r in results:
+        if r.status == "rejected" or check is None:
+            continue
+        out = excluded_targets(r.info)
+        excluded += [{"id": r.id, "joint": j, "type": t["kind"], "reason": t["reason"], "message": t["message"]}
+                     for j, t in out.items()]
+        if len(out) == len(r.info["targets"]):
+            r.status, r.reason = "rejected", "infeasible"
+            r.message = "; ".join(f"{t['reason']}: {t['message']}" for t in out.values())
     valid = [r for r in results if r.status != "rejected"]
     split = assign_split([r.id for r in valid], dataset.test_fraction, dataset.split_seed)
     manifest = Manifest(info={
@@ -123,13 +168,17 @@ def build_dataset(
         "built": sum(r.status == "built" for r in results),
         "cached": sum(r.status == "cached" for r in results),
         "seconds": round(time.perf_counter() - start, 2),
+        "feasibility": None if check is None else {"key": check.key, "excluded_targets": len(excluded)},
     })
     for r in valid:
+        out = excluded_targets(r.info) if check is not None else {}
         targets = [{k: t[k] for k in ("joint", "link", "type", "instruction", "vertical", "horizontal")}
-                   | {"handle_orientation": t["handle"]["orientation"]} for t in r.info["targets"]]
+                   | {"handle_orientation": t["handle"]["orientation"]} for t in r.info["targets"]
+                   if t["joint"] not in out]
         manifest.cabinets.append({"id": r.id, "split": split[r.id], "path": r.id, "targets": targets,
                                   "hulls": r.info["stats"]["hulls"]})
     manifest.rejected = [{"id": r.id, "reason": r.reason, "message": r.message}
                          for r in results if r.status == "rejected"]
+    manifest.excluded_targets = [e for e in excluded if e["id"] in {r.id for r in valid}]
     manifest.save(out_root)
     return manifest

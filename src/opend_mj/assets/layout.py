@@ -30,10 +30,12 @@ class Manifest:
     cabinets: list[dict] = field(default_factory=list)
     rejected: list[dict] = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    #: Targets of built cabinets that the feasibility check excluded: id, joint, type, reason, message.
+    excluded_targets: list[dict] = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {"info": self.info, "cabinets": self.cabinets, "rejected": self.rejected,
-                "summary": split_table(self.cabinets)}
+                "excluded_targets": self.excluded_targets, "summary": split_table(self.cabinets)}
 
     def targets(self, split: str = "all") -> list[tuple[dict, dict]]:
         """(cabinet, target) pairs of a split ("train", "test" or "all"), in a stable order."""
@@ -52,7 +54,8 @@ def load_manifest(cabinets_dir: Path) -> Manifest:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no manifest; run `opend build-assets --out {cabinets_dir}` first")
     data = json.loads(path.read_text())
-    return Manifest(cabinets=data["cabinets"], rejected=data["rejected"], info=data.get("info", {}))
+    return Manifest(cabinets=data["cabinets"], rejected=data["rejected"], info=data.get("info", {}),
+                    excluded_targets=data.get("excluded_targets", []))
 
 
 def split_table(cabinets: list[dict]) -> dict[str, dict[str, int]]:

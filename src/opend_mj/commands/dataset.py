@@ -26,13 +26,15 @@ import click
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Decomposition cache shared across output folders (default: $OPEND_CACHE_DIR, else "
                    "$XDG_CACHE_HOME/opend-mj, else ~/.cache/opend-mj).")
+@click.option("--no-feasibility", is_flag=True, help="Skip the feasibility check (each target pushed open with "
+              "the cabinet standing in a room; infeasible targets are excluded with their reason).")
 @click.option("--no-progress", is_flag=True, help="No progress bar (for logs).")
 @click.option("--backend", type=click.Choice(["local", "ray"]), default="local", show_default=True,
               help="local: this machine's process pool; ray: a Ray cluster (--address) or a local Ray instance.")
 @click.option("--address", default=None, help="Ray cluster address (e.g. auto); with --backend ray. The "
               "cluster's machines must see --source and --out at the same paths.")
-def build_assets(source, out, ids, count, seed, workers, scale, force, cache_dir, no_progress, backend,
-                 address) -> None:
+def build_assets(source, out, ids, count, seed, workers, scale, force, cache_dir, no_feasibility, no_progress,
+                 backend, address) -> None:
     """Compile cabinets into MJCF, filter them, split them and write the manifest."""
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
@@ -59,10 +61,15 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, cache_dir
         workers = 2
     from opend_mj.backends import BackendError
 
+    check = None
+    if not no_feasibility:
+        from opend_mj.sim.feasibility import RoomCheck
+
+        check = RoomCheck()
     try:
         manifest = build_dataset(sources, out, config=config, dataset=dataset, workers=workers, force=force,
                                  progress=not no_progress, backend=backend, address=address,
-                                 cache_dir=cache_dir)
+                                 cache_dir=cache_dir, check=check)
     except BackendError as exc:
         raise click.ClickException(str(exc)) from exc
     info = manifest.info
@@ -74,6 +81,12 @@ def build_assets(source, out, ids, count, seed, workers, scale, force, cache_dir
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     if reasons:
         click.echo("rejected: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())))
+    if check is not None:
+        n_targets = sum(len(c["targets"]) for c in manifest.cabinets) + len(manifest.excluded_targets)
+        click.echo(f"feasibility in a room: {n_targets - len(manifest.excluded_targets)} of {n_targets} targets "
+                   f"open to >= {check.config.reach:.0%} of their range; {len(manifest.excluded_targets)} excluded")
+        for e in manifest.excluded_targets:
+            click.echo(f"  excluded {e['id']} {e['joint']} [{e['reason']}]: {e['message']}")
     click.echo(format_split_table(manifest.to_json()["summary"]))
     if not manifest.cabinets:
         click.echo("error: no cabinet was built", err=True)

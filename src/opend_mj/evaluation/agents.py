@@ -208,6 +208,8 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         "target_type": task.target.kind,
         "instruction": task.instruction,
         "room": task.episode.room_index(),
+        "joint_range": [task.target.lower, task.target.upper],
+        "closed_value": task.target.closed,
         **values,
         "failed_stage": failed,
         "site_to_handle": round(closest, 4),

@@ -1,8 +1,10 @@
 """`opend score`: the paper's tables from results files.
 
-Success is recomputed from ``open_ratio`` at thresholds 20 / 50 / 90 % (20 % is the benchmark's).
-Error records (``"error"`` in the line) count as failures at stage ``error``. When several files hold
-the same episode key, the last one wins.
+Success is recomputed from ``open_ratio`` at thresholds 20 / 50 / 90 % (20 % is the benchmark's, the
+paper's), and from the fraction of the joint range opened at 75 % (ManiSkill3's criterion for its
+OpenCabinet tasks: ``range_ratio``, or the record's raw ``joint_value`` and ``joint_range``; a record
+with neither, written before they were recorded, shows n/a). Error records (``"error"`` in the line)
+count as failures at stage ``error``. When several files hold the same episode key, the last one wins.
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ from pathlib import Path
 from typing import Iterable
 
 THRESHOLDS = (0.2, 0.5, 0.9)
+#: ManiSkill3's success criterion: the target joint at or beyond this fraction of its range.
+RANGE_THRESHOLD = 0.75
 SPLITS = ("train", "test")
 KINDS = ("drawer", "door", "overall")
 STAGE_ORDER = ("locate", "approach", "grasp", "pull", "physics", "error")
@@ -31,6 +35,29 @@ def load_records(paths: Iterable[Path]) -> list[dict]:
 
 def _ok(r: dict, threshold: float) -> bool:
     return "error" not in r and float(r.get("open_ratio") or 0.0) > threshold
+
+
+def range_fraction(r: dict) -> float | None:
+    """Fraction of its joint range the target was opened (0 for an error or a diverged episode);
+    None when the record says neither ``range_ratio`` nor ``joint_value`` with ``joint_range``."""
+    if "error" in r:
+        return 0.0
+    if r.get("range_ratio") is not None:
+        return float(r["range_ratio"])
+    q, span = r.get("joint_value"), r.get("joint_range")
+    if q is not None and span:
+        lo, hi = float(span[0]), float(span[1])
+        closed = float(r["closed_value"]) if r.get("closed_value") is not None else min(max(0.0, lo), hi)
+        sign = 1.0 if closed - lo <= hi - closed else -1.0
+        return max(0.0, (float(q) - closed) * sign) / max(hi - lo, 1e-9)
+    if r.get("open_ratio") is None and not r.get("success"):
+        return 0.0  # a failed episode that recorded no joint at all (physics diverged)
+    return None
+
+
+def _ok_range(r: dict, threshold: float = RANGE_THRESHOLD) -> bool | None:
+    f = range_fraction(r)
+    return None if f is None else f >= threshold
 
 
 def _kind(r: dict) -> str | None:
@@ -52,24 +79,35 @@ def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
     return dict(sorted(out.items()))
 
 
-def success_table(records: list[dict], threshold: float = 0.2) -> list[dict]:
-    """Rows (hand, solver) x columns (split, kind): success rate, count."""
+def success_table(records: list[dict], threshold: float = 0.2, measure: str = "open") -> list[dict]:
+    """Rows (hand, solver) x columns (split, kind): success rate, successes, episodes.
+
+    ``measure``: ``"open"`` (open ratio > threshold, the paper's) or ``"range"`` (fraction of the joint
+    range >= threshold, ManiSkill3's). A cell with an episode whose range is unknown has rate None."""
+    if measure not in ("open", "range"):
+        raise ValueError(f"measure must be 'open' or 'range', not {measure!r}")
     rows = []
     for (hand, solver), recs in groups(records).items():
-        row = {"hand": hand, "solver": solver, "threshold": threshold}
+        row = {"hand": hand, "solver": solver, "threshold": threshold, "measure": measure}
         for split in SPLITS:
             for kind in KINDS:
                 sel = [r for r in recs if r.get("split") == split and (kind == "overall" or _kind(r) == kind)]
                 n = len(sel)
-                k = sum(_ok(r, threshold) for r in sel)
-                row[f"{split}_{kind}"] = (k / n if n else None, k, n)
+                if measure == "open":
+                    oks = [_ok(r, threshold) for r in sel]
+                else:
+                    oks = [_ok_range(r, threshold) for r in sel]
+                k = sum(bool(o) for o in oks)
+                row[f"{split}_{kind}"] = (k / n if n and None not in oks else None, k, n)
         rows.append(row)
     return rows
 
 
 def _fmt(cell) -> str:
     rate, k, n = cell
-    return "-" if not n else f"{100 * rate:.1f} ({k}/{n})"
+    if not n:
+        return "-"
+    return "n/a" if rate is None else f"{100 * rate:.1f} ({k}/{n})"
 
 
 def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
@@ -79,9 +117,12 @@ def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
     a wrong target; ties keep the name order.
     """
     rows = []
+    full = {(r["hand"], r["solver"]): r for r in success_table(records, RANGE_THRESHOLD, "range")}
     for row in success_table(records, threshold):
         recs = groups(records)[(row["hand"], row["solver"])]
-        rows.append({**row, "episodes": len(recs), "wrong_targets": sum(bool(r.get("others_moved")) for r in recs)})
+        wide = full[(row["hand"], row["solver"])]
+        rows.append({**row, "episodes": len(recs), "wrong_targets": sum(bool(r.get("others_moved")) for r in recs),
+                     "test_overall_range": wide["test_overall"], "train_overall_range": wide["train_overall"]})
 
     def rate(cell):
         return -1.0 if cell[0] is None else cell[0]
@@ -111,12 +152,15 @@ def report_markdown(records: list[dict]) -> str:
     lines = [f"# Results ({len(records)} episodes)", ""]
     lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
     lines.append("")
-    lines.append("| rank | solver / agent | hand | test overall | test drawer | test door | train overall | episodes | "
-                 "wrong target opened |")
-    lines.append("|---|---|---|---|---|---|---|---|---|")
+    lines.append("Beside each 20 % figure, ManiSkill3's criterion: the joint at >= 75 % of its range.")
+    lines.append("")
+    lines.append("| rank | solver / agent | hand | test overall | test >= 75 % range | test drawer | test door | "
+                 "train overall | train >= 75 % range | episodes | wrong target opened |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in ranking(records):
         lines.append(f"| {r['rank']} | {r['solver']} | {r['hand']} | {_fmt(r['test_overall'])} | "
-                     f"{_fmt(r['test_drawer'])} | {_fmt(r['test_door'])} | {_fmt(r['train_overall'])} | "
+                     f"{_fmt(r['test_overall_range'])} | {_fmt(r['test_drawer'])} | {_fmt(r['test_door'])} | "
+                     f"{_fmt(r['train_overall'])} | {_fmt(r['train_overall_range'])} | "
                      f"{r['episodes']} | {r['wrong_targets']} |")
     lines.append("")
     for th in THRESHOLDS:
@@ -129,6 +173,14 @@ def report_markdown(records: list[dict]) -> str:
             cells = [_fmt(row[f"{s}_{k}"]) for s in SPLITS for k in KINDS]
             lines.append(f"| {row['hand']} | {row['solver']} | " + " | ".join(cells) + " |")
         lines.append("")
+    lines.append(f"## Success rate, joint at >= {int(round(RANGE_THRESHOLD * 100))} % of its range (ManiSkill3)")
+    lines.append("")
+    lines.append(head)
+    lines.append("|" + "---|" * (2 + len(SPLITS) * len(KINDS)))
+    for row in success_table(records, RANGE_THRESHOLD, "range"):
+        cells = [_fmt(row[f"{s}_{k}"]) for s in SPLITS for k in KINDS]
+        lines.append(f"| {row['hand']} | {row['solver']} | " + " | ".join(cells) + " |")
+    lines.append("")
     lines.append("## Failure stages (episodes below 20 %)")
     lines.append("")
     lines.append("| hand | solver | split | failures | " + " | ".join(STAGE_ORDER) + " |")
@@ -177,13 +229,14 @@ def write_csv(records: list[dict], path: Path) -> Path:
     path = Path(path)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["hand", "solver", "threshold", "split", "kind", "success_rate", "successes", "episodes"])
-        for th in THRESHOLDS:
-            for row in success_table(records, th):
+        w.writerow(["hand", "solver", "measure", "threshold", "split", "kind", "success_rate", "successes",
+                    "episodes"])
+        for measure, th in [("open_ratio", t) for t in THRESHOLDS] + [("range", RANGE_THRESHOLD)]:
+            for row in success_table(records, th, "open" if measure == "open_ratio" else "range"):
                 for s in SPLITS:
                     for k in KINDS:
                         rate, n_ok, n = row[f"{s}_{k}"]
-                        w.writerow([row["hand"], row["solver"], th, s, k,
+                        w.writerow([row["hand"], row["solver"], measure, th, s, k,
                                     "" if rate is None else f"{rate:.4f}", n_ok, n])
     return path
 

@@ -74,6 +74,22 @@ def load_cabinet_info(cabinet_dir: Path) -> dict:
         raise CabinetError(f"{path}: corrupt cabinet description ({exc})") from exc
 
 
+def moving_bodies(mjcf_root) -> list:
+    """Bodies of an MJCF model that move: every body with a joint, and the bodies below it."""
+    out = []
+
+    def walk(body, moving: bool) -> None:
+        moving = moving or bool(body.find_all("joint", immediate_children_only=True))
+        if moving:
+            out.append(body)
+        for child in body.find_all("body", immediate_children_only=True):
+            walk(child, moving)
+
+    for top in mjcf_root.worldbody.find_all("body", immediate_children_only=True):
+        walk(top, False)
+    return out
+
+
 class Cabinet(composer.Entity):
     """A compiled cabinet (`cabinets/<id>/cabinet.xml` + `cabinet.json`), fixed to the floor."""
 
@@ -105,6 +121,10 @@ class Cabinet(composer.Entity):
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(self.info["bounds"]["min"]), np.asarray(self.info["bounds"]["max"])
+
+    def moving_bodies(self) -> list:
+        """MJCF bodies that move: every body with a joint, and the bodies below it."""
+        return moving_bodies(self._mjcf_root)
 
     def target(self, joint: str) -> Target:
         for t in self.targets:

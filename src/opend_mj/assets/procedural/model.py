@@ -40,8 +40,11 @@ class Target:
 
 
 def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: float, plinth: float,
-                colours: dict) -> tuple[list[Visual], list[Target]]:
-    """Carcass visuals and movable targets of a layout (metres, mesh frame)."""
+                colours: dict, floor_fronts: bool = False) -> tuple[list[Visual], list[Target]]:
+    """Carcass visuals and movable targets of a layout (metres, mesh frame).
+
+    ``floor_fronts``: the bottom row's doors and drawer fronts reach down to the floor (the bottom panel
+    stands back behind them), as on many real cabinets without a plinth."""
     W, H, D = layout.width, layout.height, layout.depth
     g = cfg.clearance
     body = Material("body", colours["body"])
@@ -58,7 +61,8 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
         Visual("vertical_side_panel", [Box((x0, y0, zb), (x0 + t, y1 - t, zf))], body),
         Visual("vertical_side_panel", [Box((x1 - t, y0, zb), (x1, y1 - t, zf))], body),
         Visual("top_panel", [Box((x0, y1 - t, zb), (x1, y1, zf))], body),
-        Visual("bottom_panel", [Box((x0 + t, y0 + plinth, zbi), (x1 - t, y0 + plinth + t, zf))], body),
+        Visual("bottom_panel", [Box((x0 + t, y0 + plinth, zbi),
+                                    (x1 - t, y0 + plinth + t, zf - (0.02 + g if floor_fronts else 0.0)))], body),
         Visual("back_panel", [Box((x0 + t, y0 + plinth, zb), (x1 - t, y1 - t, zbi))], body),
     ]
     if plinth > 0:
@@ -114,13 +118,15 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
     door_bar_centred = bool(rng.random() < cfg.door_bar_centred_share)
     door_bar_edge = float(rng.uniform(*cfg.door_bar_edge_range))
     floor_y = y0
+    bottom_row = y0 + plinth + t  # lower edge of the cells of the bottom row
 
     targets: list[Target] = []
     for leaf, cx0, cx1, cy0, cy1 in cells:
         if leaf.kind == "open":
             continue
+        front_y0 = y0 if floor_fronts and abs(cy0 - bottom_row) < 1e-9 else cy0 + g
         if leaf.kind == "drawer":
-            lo = np.array([cx0 + g, cy0 + g, zf - t_front])
+            lo = np.array([cx0 + g, front_y0, zf - t_front])
             hi = np.array([cx1 - g, cy1 - g, zf])
             side_gap = max(g, 0.008)
             bx0, bx1 = cx0 + side_gap, cx1 - side_gap
@@ -165,7 +171,7 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
         else:
             leaves = [(cx0 + g, cx1 - g, leaf.hinge)]
         for lx0, lx1, hinge in leaves:
-            lo = np.array([lx0, cy0 + g, zf - t_front])
+            lo = np.array([lx0, front_y0, zf - t_front])
             hi = np.array([lx1, cy1 - g, zf])
             door_h = hi[1] - lo[1]
             # handle near the free edge; near the top of low doors, around 1 m up on tall doors
@@ -223,6 +229,19 @@ def unshare_vertices(visuals: list[Visual]) -> list[Visual]:
     return out
 
 
+BASES = ("floor_fronts", "inset", "low_plinth", "plinth")
+
+
+def draw_base(rng: np.random.Generator, cfg: GeneratorConfig) -> tuple[str, float]:
+    """How the cabinet meets the floor (one of ``BASES``) and its plinth height (m)."""
+    base = BASES[int(rng.choice(len(BASES), p=list(cfg.base_shares)))]
+    if base == "low_plinth":
+        return base, float(rng.uniform(*cfg.low_plinth_range))
+    if base == "plinth":
+        return base, float(rng.uniform(*cfg.plinth_range))
+    return base, 0.0
+
+
 @dataclass
 class SampledCabinet:
     """One procedural cabinet as sampled, before it is written: its layout, panel thickness and plinth
@@ -233,6 +252,7 @@ class SampledCabinet:
     index: int
     thickness: float
     plinth: float
+    base: str
     layout: Layout
     finish: str
     carcass: list[Visual]
@@ -244,7 +264,9 @@ def sample_cabinet(index: int, seed: int, config: GeneratorConfig = GeneratorCon
     cfg = config
     rng = np.random.default_rng([seed, index])
     t = float(rng.uniform(*cfg.thickness_range))
-    plinth = float(rng.uniform(0.05, 0.1)) if rng.random() < cfg.plinth_share else 0.0
+    if rng.random() < cfg.plinth_share:  # version 3 drew its plinth here: the draws stay, so that the
+        rng.uniform(0.05, 0.1)  # layout's draws start where they did; the base has a random stream of its own
+    base, plinth = draw_base(np.random.default_rng([seed, index, 4]), cfg)
     layout = sample_layout(rng, cfg, t, plinth)
     body = pick_colour(rng, cfg)
     front = body if rng.random() < cfg.front_matches_body_share else pick_colour(rng, cfg)
@@ -257,5 +279,6 @@ def sample_cabinet(index: int, seed: int, config: GeneratorConfig = GeneratorCon
         finish = list(HANDLE_FINISHES)[rng.integers(len(HANDLE_FINISHES))]
         handle = HANDLE_FINISHES[finish]
     colours = {"body": body, "front": front, "interior": interior, "handle": handle}
-    carcass, targets = build_parts(rng, cfg, layout, t, plinth, colours)
-    return SampledCabinet(f"proc_{index:04d}", int(seed), int(index), t, plinth, layout, finish, carcass, targets)
+    carcass, targets = build_parts(rng, cfg, layout, t, plinth, colours, floor_fronts=base == "floor_fronts")
+    return SampledCabinet(f"proc_{index:04d}", int(seed), int(index), t, plinth, base, layout, finish, carcass,
+                          targets)

@@ -73,6 +73,7 @@ def write_source(cabinet: SampledCabinet, out_root: Path, config: GeneratorConfi
     cfg = config
     cabinet_id, layout, targets, carcass = cabinet.id, cabinet.layout, cabinet.targets, cabinet.carcass
     seed, index, t, plinth, finish = cabinet.seed, cabinet.index, cabinet.thickness, cabinet.plinth, cabinet.finish
+    base = cabinet.base
     folder = Path(out_root) / cabinet_id
     (folder / "textured_objs").mkdir(parents=True, exist_ok=True)
     s, nd = cfg.scale, cfg.decimals
@@ -138,6 +139,7 @@ def write_source(cabinet: SampledCabinet, out_root: Path, config: GeneratorConfi
                        (("width", layout.width), ("height", layout.height), ("depth", layout.depth))},
             "panel_thickness_m": round(t, 4),
             "plinth_m": round(plinth, 4),
+            "base": base,
             "layout": layout.name,
             "describable": bool(ok),
             "describable_intended": bool(layout.describable),

@@ -358,8 +358,20 @@ class RoomArena(composer.Arena):
         return self._cabinet_site
 
     def attach_cabinet(self, cabinet_entity):
-        """Attach a cabinet entity (fixed, no free joint) at the origin; returns the attachment frame."""
-        return self.attach(cabinet_entity, self._cabinet_site)
+        """Attach a cabinet entity (fixed, no free joint) at the origin; returns the attachment frame.
+
+        The carcass stands on the floor; its doors and drawers do not touch it (no floor contact for
+        the cabinet's moving bodies, as real fronts hang a few millimetres clear of the floor; every
+        other contact, the hand's with the floor included, is kept). See docs/cabinets.md.
+        """
+        from ..cabinet import moving_bodies
+
+        frame = self.attach(cabinet_entity, self._cabinet_site)
+        bodies = (cabinet_entity.moving_bodies() if hasattr(cabinet_entity, "moving_bodies")
+                  else moving_bodies(cabinet_entity.mjcf_model))
+        for body in bodies:
+            self._mjcf_root.contact.add("exclude", body1="world", body2=body)
+        return frame
 
     def add_camera(self, pose, name: str = "front"):
         from opend_mj.sim.camera import add_camera
