@@ -37,7 +37,9 @@ def succeeded(record: dict, criterion: str) -> bool:
     if criterion == "open50":
         return float(record.get("open_ratio") or 0.0) > 0.5
     if criterion == "range75":
-        return float(record.get("range_ratio") or 0.0) >= 0.75
+        from opend_mj.evaluation.scoring import RANGE_THRESHOLD, range_fraction
+
+        return (range_fraction(record) or 0.0) >= RANGE_THRESHOLD
     raise ValueError(f"unknown success criterion {criterion!r}; known: {[c for c, _ in CRITERIA]}")
 
 
