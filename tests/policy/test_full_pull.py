@@ -134,3 +134,20 @@ def test_pulls_say_where_they_ended():
     planner.pull(part, g, False, PullState(quat0=quat), result)
     ends = [e["pull_end"] for e in result.events if "pull_end" in e]
     assert ends == ["stall"]
+
+
+def test_no_push_recovery_without_the_time_it_needs():
+    """A door lost with less than ``push_min_time`` of the episode left is not pushed from inside (a
+    push cut off by the time budget leaves the hand inside the door's swing)."""
+    part = HeldPart("door", math.radians(90), radius=0.5, hinge_y=-0.5)
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), PlannerConfig())
+    state = PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]))
+    for a in np.linspace(0.0, math.radians(40), 20):  # a held track 40 degrees round its hinge
+        part.opening = float(a)
+        state.track.append(part.site_pos())
+    state.turned = 40.0
+    part.n_steps = int(round((PlannerConfig().max_time - 5.0) / DT))
+    result = PlanResult(stage_reached="pull", failed_stage=None)
+    assert planner.recover_door(part, state, result) is False
+    assert result.events[-1] == {"push_skipped": {"time_left": pytest.approx(5.0, abs=0.02)}}
+    assert planner.door_arc(state) is not None  # the arc is known: only the time held the push back

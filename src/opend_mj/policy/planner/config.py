@@ -206,6 +206,11 @@ class RecoveryConfig:
     #: doors lost after opening at least ``push_min_turn`` (deg): push them open from inside
     push_recovery: bool = True
     push_min_turn: float = 8.0
+    #: a push starts only with at least this much of the episode's time budget left (s): going
+    #: round the free edge into the gap takes 2-4 s and the sweep several more; a push cut off by
+    #: the budget leaves the hand inside the door's swing, where the next moves push the door back
+    #: shut, and its moves overran the budget by up to 2 s
+    push_min_time: float = 8.0
     #: the least number of held site positions a circle is fitted to
     push_min_track: int = 8
     #: a hinge fitted to the handle's path is believed when within ``hinge_agreement`` (m) of the
