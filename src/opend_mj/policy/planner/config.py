@@ -162,8 +162,9 @@ class DoorConfig:
     #: None: always taken
     turn_back_deg: float | None = 30.0
     turn_back_after_deg: float = 30.0
-    #: the hand's yaw = ``yaw_gain`` * (the pull direction's turn) + ``yaw_lead_deg`` (in the turn's
-    #: sense); a hand that lags the door presses its fingertips into the panel on one side
+    #: the hand's yaw = ``yaw_gain`` * (the pull direction's turn) + ``yaw_lead_deg`` (deg, in the
+    #: turn's sense, at most the turn); a hand that lags the door presses its fingertips into the
+    #: panel on one side
     yaw_gain: float = 1.0
     yaw_lead_deg: float = 0.0
     #: pull this many degrees beyond the pull direction, in the sense of the turn
