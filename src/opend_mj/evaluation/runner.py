@@ -270,6 +270,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         "front_seen": [e["front_seen"] for e in plan.events if "front_seen" in e],
         "verify": [e["verify"] for e in plan.events if "verify" in e],
         "turned_deg": round(plan.turned_deg, 2),
+        "pull_end": [e["pull_end"] for e in plan.events if "pull_end" in e],  # why each pull ended
         "sim_seconds": round(float(physics.data.time), 3),
         "max_penetration_mm": round(penetration.deepest * 1000, 2),
         "physics_warnings": list(warnings),

@@ -114,11 +114,16 @@ class PullConfig:
     """The pull: the target leads the grasp site along the pull direction at bounded speed until the
     part stops, the travel is done or the grip is lost."""
 
-    #: speed (m/s), lead of the target ahead of the site (m), maximum travel per kind (m)
+    #: speed (m/s), lead of the target ahead of the site (m), maximum travel per kind (m). The
+    #: travel limits are safety caps: a pull ends at the part's stop (the site stalls) before them.
+    #: Drawers: the real OpenD train cabinets' drawers slide 0.24-0.70 m. Doors: the handle's path
+    #: to a 90-degree stop is 1.73 m on a door 1.1 m wide (the real set's widest handles are 1.15 m
+    #: from their hinge); 2.0 m is 95 degrees at the largest believed hinge radius (1.2 m,
+    #: ``DoorConfig.hinge_radius_range``), or 170 degrees at 0.67 m
     speed: float = 0.15
     lead: float = 0.04
-    drawer_travel: float = 0.45
-    door_travel: float = 0.9
+    drawer_travel: float = 0.8
+    door_travel: float = 2.0
     #: stop pulling when the site moved less than ``stall_distance`` (m) in ``stall_time`` (s)
     stall_time: float = 0.6
     stall_distance: float = 0.008
@@ -148,8 +153,9 @@ class DoorConfig:
     direction_gain: float = 0.35
     #: the pull direction may point back toward the cabinet (+x) at most this much (sine of the angle)
     max_pull_toward_cabinet: float = 0.35
-    #: stop turning once the pull direction turned this much (deg)
-    max_turn_deg: float = 110.0
+    #: stop turning once the pull direction turned this much (deg): a door's own stop ends the pull
+    #: before (the real OpenD train set's doors open 90-179 degrees)
+    max_turn_deg: float = 170.0
     #: without a hinge: once the direction turned at least ``turn_back_after_deg``, a direction
     #: ``turn_back_deg`` back from the farthest turn is not taken (a door opens one way; at its stop
     #: the hand is pushed aside, and following the direction round would drag the door shut).
@@ -166,6 +172,10 @@ class DoorConfig:
     #: stop once the site came back toward the cabinet (+x) this far (m) from the farthest it got:
     #: the door is at its stop (or beyond 90 deg); pulling on would drag it shut. None: never
     back_stop: float | None = 0.03
+    #: the back stop also for a pull about a hinge seen in depth? (off: past 90 degrees a door's
+    #: handle comes back toward the cabinet along the circle the pull follows, which is the door
+    #: opening on, not a door at its stop; the door's stop stalls the site instead)
+    back_stop_with_hinge: bool = False
     #: with a hinge seen in depth: pull along the circle about it (the tangent at the grasp site,
     #: wherever the site slid to along a bar) when the handle is ``hinge_radius_range`` (m) from it;
     #: drop the hinge when, ``hinge_check_distance`` (m) into the pull, the handle moves the other
@@ -197,6 +207,11 @@ class RecoveryConfig:
     #: doors lost after opening at least ``push_min_turn`` (deg): push them open from inside
     push_recovery: bool = True
     push_min_turn: float = 8.0
+    #: a push starts only with at least this much of the episode's time budget left (s): going
+    #: round the free edge into the gap takes 2-4 s and the sweep several more; a push cut off by
+    #: the budget leaves the hand inside the door's swing, where the next moves push the door back
+    #: shut, and its moves overran the budget by up to 2 s
+    push_min_time: float = 8.0
     #: the least number of held site positions a circle is fitted to
     push_min_track: int = 8
     #: a hinge fitted to the handle's path is believed when within ``hinge_agreement`` (m) of the

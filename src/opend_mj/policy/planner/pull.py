@@ -23,6 +23,13 @@ from opend_mj.transforms import turn_about_z
 PULL_SLACK_TIME = 3.0
 
 
+def _ended(result: PlanResult, state: PullState, status: str, why: str) -> str:
+    """Record why a pull ended (``{"pull_end": why, ...}``: "stall", "travel", "back_stop", "time",
+    "steps", "slipped" or "wrong_kind") with its travel (m) and turn (deg); returns ``status``."""
+    result.events.append({"pull_end": why, "travelled": round(state.travelled, 4), "turned": round(state.turned, 1)})
+    return status
+
+
 @dataclass
 class PullRun:
     """The running state of one pull (one grasp's), beside the :class:`PullState` kept across
@@ -64,19 +71,19 @@ class Pulling:
             self._start_hinge_pull(state, start, result)
         for k in range(max_steps):
             if self._time_left(robot) <= 0.0:
-                return "done"
+                return _ended(result, state, "done", "time")
             site = robot.site_pos()
             status = self._grip_check(robot, site, run, state, result)
             if status is not None:
-                return status
+                return _ended(result, state, status, status)
             run.history.append(site.copy())
             if door:
                 self._steer_door(site, run, state, result)
             self._advance(robot, site, run, g, state, dt)
-            status = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
-            if status is not None:
-                return status
-        return "done"
+            why = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
+            if why is not None:
+                return _ended(result, state, "done", why)
+        return _ended(result, state, "done", "steps")
 
     # ---------------------------------------------------------------- one control step
     def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> str | None:
@@ -192,22 +199,24 @@ class Pulling:
 
     def _pull_finished(self, robot, k: int, run: PullRun, state: PullState, result: PlanResult,
                        travel_max: float, stall_n: int) -> str | None:
-        """"done" once the travel is done, a door swings back toward the cabinet (at its stop), or
-        the site stalls; else None."""
+        """Why the pull is finished: "travel" once the travel is done, "back_stop" once a door
+        pulled without a hinge swings back toward the cabinet (at its stop), "stall" once the site
+        stalls (the part at its stop); else None."""
         cfg = self.config
         if state.travelled >= travel_max:
-            return "done"
+            return "travel"
         site = run.history[-1]
-        if run.door and cfg.door.back_stop is not None:
+        back_stop = cfg.door.back_stop is not None and (state.hinge is None or cfg.door.back_stop_with_hinge)
+        if run.door and back_stop:
             run.least_x = min(run.least_x, float(site[0]))
             if float(site[0]) - run.least_x > cfg.door.back_stop:
                 # the handle swings back toward the cabinet: the door is at its stop (or beyond
                 # 90 degrees); pulling on would drag it shut
                 result.events.append({"door_back_stop": round(state.turned, 1)})
-                return "done"
+                return "back_stop"
         if k > stall_n and float(np.linalg.norm(run.history[-1] - run.history[-1 - stall_n])) \
                 < cfg.pulling.stall_distance:
-            return "done"
+            return "stall"
         return None
 
     # ---------------------------------------------------------------- the door's circle

@@ -52,8 +52,11 @@ class PushRecovery:
 
     def recover_door(self, robot, state: PullState, result: PlanResult) -> bool:
         """Push a door that opened and was lost open from inside; False where its arc is unknown or
-        it opened too little (``push_min_turn``)."""
+        it opened too little (``push_min_turn``) or too little time is left (``push_min_time``)."""
         cfg = self.config.recovery
+        if self._time_left(robot) < cfg.push_min_time:
+            result.events.append({"push_skipped": {"time_left": round(self._time_left(robot), 2)}})
+            return False
         arc = self.door_arc(state)
         if arc is None:
             return False
