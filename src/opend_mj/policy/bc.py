@@ -6,8 +6,9 @@ instructed handle in the RGB-D image, and the planner's perception back-projects
 handle, the instruction and the hand's own state (`policy.learned.bc`) and predicts the next
 ``chunk`` actions; the action sent blends every prediction made for this step, oldest weighted most
 (ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). The agent stops
-(returns None) where the solver finds no handle, and when the time passes the longest training
-demonstration's length (the planner's demonstrations end holding the opened part).
+(returns None) where the solver finds no handle, and at ``stop_time`` (default: the checkpoint's,
+the time by which 95 % of its training demonstrations had ended, holding the opened part; the
+protocol's 15 s limit applies in any case).
 
 Ground truth is never read: the observation is the protocol's (`opend_mj.policy.agents`).
 """
@@ -36,13 +37,14 @@ class BCAgent:
 
     ``checkpoint``: a file of `opend train-policy` (default ``checkpoints/bc_<hand>.pt``);
     ``solver``: the handle solver that reads the first image (never one that needs ground truth);
-    ``threads``: torch CPU threads (1 keeps parallel episodes from competing)."""
+    ``threads``: torch CPU threads (1 keeps parallel episodes from competing); ``stop_time``: s of
+    simulated time after which the agent stops (default: the checkpoint's ``stop_time``)."""
 
     control = "absolute"
     images = "first"
 
     def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
-                 name: str | None = None, **solver_options):
+                 name: str | None = None, stop_time: float | None = None, **solver_options):
         from opend_mj.policy.solvers import needs_ground_truth, solver_factory
 
         if needs_ground_truth(solver):
@@ -52,6 +54,7 @@ class BCAgent:
         self._solver = None
         self.checkpoint = checkpoint
         self.threads = int(threads)
+        self.stop_time = stop_time
         self.name = name or f"bc-{solver}"
         self._episode = None
 
@@ -70,7 +73,8 @@ class BCAgent:
         if ckpt.get("hand") not in (None, episode.hand):
             raise ValueError(f"{path}: trained for the {ckpt['hand']} hand, not {episode.hand}")
         self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
-        self._max_time = float(ckpt.get("max_time", episode.time_limit))
+        default = ckpt.get("stop_time", ckpt.get("max_time", episode.time_limit))
+        self._max_time = float(self.stop_time if self.stop_time is not None else default)
         self._episode = episode
         self._ctx = None
         self._centre = None

@@ -41,6 +41,11 @@ class DemoArrays:
     cabinets: list[str]
 
     @property
+    def stop_time(self) -> float:
+        """s: 95 % of the demonstrations are over by then (the agent's default stop)."""
+        return float(np.percentile(self.length, 95)) / 60.0
+
+    @property
     def n_demos(self) -> int:
         return len(self.ctx)
 
@@ -179,7 +184,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     summary = {
         "hand": hand, "config": config.to_dict(), "demos": int(data.n_demos), "train_demos": int(len(train_ids)),
         "val_demos": int(len(val_ids)), "samples": int(len(data.steps)), "cabinets": len(set(data.cabinets)),
-        "max_time": round(data.max_time, 3), "parameters": int(sum(p.numel() for p in model.parameters())),
+        "max_time": round(data.max_time, 3), "stop_time": round(data.stop_time, 3), "parameters": int(sum(p.numel() for p in model.parameters())),
         "seconds": round(seconds, 1), "threads": torch.get_num_threads(), "history": history,
     }
     if out is not None:
@@ -198,7 +203,7 @@ def save_checkpoint(model, summary: dict, data: DemoArrays, adapter, out: Path) 
             "config": summary["config"], "hand": summary["hand"],
             "dims": {"ctx": int(data.ctx.shape[1]), "step": int(data.steps.shape[1]), "act": int(data.actions.shape[1])},
             "finger_low": adapter.finger_low.tolist(), "finger_high": adapter.finger_high.tolist(),
-            "max_time": summary["max_time"], "summary": summary}
+            "max_time": summary["max_time"], "stop_time": summary["stop_time"], "summary": summary}
     torch.save(ckpt, out)
     out.with_suffix(".json").write_text(json.dumps(summary, indent=1) + "\n")
 
