@@ -38,13 +38,16 @@ class BCAgent:
     ``checkpoint``: a file of `opend train-policy` (default ``checkpoints/bc_<hand>.pt``);
     ``solver``: the handle solver that reads the first image (never one that needs ground truth);
     ``threads``: torch CPU threads (1 keeps parallel episodes from competing); ``stop_time``: s of
-    simulated time after which the agent stops (default: the checkpoint's ``stop_time``)."""
+    simulated time after which the agent stops (default: the checkpoint's ``stop_time``);
+    ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
+    values weight the newest predictions most)."""
 
     control = "absolute"
     images = "first"
 
     def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
-                 name: str | None = None, stop_time: float | None = None, **solver_options):
+                 name: str | None = None, stop_time: float | None = None, ensemble_decay: float | None = None,
+                 **solver_options):
         from opend_mj.policy.solvers import needs_ground_truth, solver_factory
 
         if needs_ground_truth(solver):
@@ -55,6 +58,7 @@ class BCAgent:
         self.checkpoint = checkpoint
         self.threads = int(threads)
         self.stop_time = stop_time
+        self.ensemble_decay = ensemble_decay
         self.name = name or f"bc-{solver}"
         self._episode = None
 
@@ -114,7 +118,8 @@ class BCAgent:
         k = self.config.chunk
         first = max(0, t - k + 1)
         covering = [self._preds[i][t - i] for i in range(first, t + 1)]  # oldest first
-        w = np.exp(-self.config.ensemble_decay * np.arange(len(covering)))
+        decay = self.config.ensemble_decay if self.ensemble_decay is None else self.ensemble_decay
+        w = np.exp(-decay * np.arange(len(covering)))
         blended = (np.asarray(covering) * w[:, None]).sum(axis=0) / w.sum()
         for i in range(first):  # predictions no longer covering any step
             self._preds[i] = None
