@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.apps.demos import Demo, append_demos, env_args, read_demos
+from opend_mj.apps.demos import Demo, _episode_json, append_demos, env_args, read_demos
 from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.jobs import group_jobs
 
@@ -101,7 +101,7 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     """One planner episode of ``job``: (its log line, the demonstration). ``env``: a scene of the
     job's `scene_key` to reuse (as `opend run` reuses them), else one is made."""
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
-    from opend_mj.policy.learned.bc import perceive_handle
+    from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle
     from opend_mj.policy.planner import GraspProfile, Observation, Planner, PlannerConfig, Robot
     from opend_mj.policy.solvers import get_solver, needs_ground_truth
     from opend_mj.sim.camera import RGBDCamera
@@ -148,8 +148,6 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     success = bool(outcome.success) and diverged is None
     failed = None if success else ("physics" if diverged else (plan.failed_stage or "pull"))
     box = np.asarray(percept.box.as_tuple() if percept is not None else (np.nan,) * 4, float)
-    from opend_mj.policy.learned.bc import PERCEPT_DIM
-
     feats = percept.vector() if percept is not None else np.full(PERCEPT_DIM, np.nan)
     obs = {k: np.asarray(v) for k, v in rec.obs.items()}
     obs["instruction"] = np.repeat(instruction_onehot(task.instruction)[None].astype(np.float64), n, axis=0)
@@ -175,12 +173,6 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
             "seed": job.seed, "split": job.split, "success": success, "failed_stage": failed,
             "open_ratio": round(float(outcome.open_ratio), 4), "steps": n, "wall_seconds": round(attrs["wall_seconds"], 2)}
     return line, demo
-
-
-def _episode_json(spec) -> str:
-    from opend_mj.apps.demos import _episode_json as episode_json
-
-    return episode_json(spec)
 
 
 def _record_group(args) -> list[tuple[dict, Demo | None]]:
