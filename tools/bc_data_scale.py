@@ -93,6 +93,11 @@ def main(argv=None) -> None:
             print(f"| {hand} | planner | " + " | ".join(f"{100 * k / m:.1f} % ({k}/{m})" if m else "-"
                                                        for k, m in planner[hand].values()) + " |")
     ax.set_xscale("log")
+    from matplotlib.ticker import NullFormatter
+
+    ticks = sorted({n for rows in by_hand.values() for n, _ in rows})
+    ax.set_xticks(ticks, [str(n) for n in ticks])
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("successful planner demonstrations used for training")
     ax.set_ylabel("success on the test split (%)")
     ax.set_ylim(0, 100)
