@@ -39,7 +39,7 @@ def main(argv=None) -> None:
     from opend_mj.evaluation.results import load_results
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--run", action="append", required=True, metavar="N=RESULTS",
+    ap.add_argument("--run", action="append", required=True, metavar="[SERIES:]N=RESULTS",
                     help="number of training demonstrations = results file of that policy (repeatable)")
     ap.add_argument("--planner", action="append", default=[], metavar="RESULTS",
                     help="the planner's results on the same episodes (a reference line per hand)")
@@ -47,9 +47,10 @@ def main(argv=None) -> None:
     ap.add_argument("--title", default="Behaviour cloning: success against demonstrations")
     args = ap.parse_args(argv)
 
-    by_hand: dict[str, list[tuple[int, dict]]] = defaultdict(list)
+    by_hand: dict[tuple[str, str], list[tuple[int, dict]]] = defaultdict(list)
     for item in args.run:
-        n, sep, path = item.partition("=")
+        head, sep, path = item.partition("=")
+        series, _, n = head.rpartition(":")
         if not sep or not n.strip().isdigit():
             ap.error(f"--run {item!r}: expected N=RESULTS")
         records = load_results(Path(path), repair=False)
@@ -58,7 +59,7 @@ def main(argv=None) -> None:
         hands = {r["hand"] for r in records}
         if len(hands) != 1:
             ap.error(f"{path}: records of several hands {sorted(hands)}")
-        by_hand[hands.pop()].append((int(n), rates(records)))
+        by_hand[(hands.pop(), series.strip())].append((int(n), rates(records)))
     planner = {}
     for path in args.planner:
         records = load_results(Path(path), repair=False)
@@ -71,26 +72,31 @@ def main(argv=None) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    print("| hand | demos | overall | drawers | doors |\n|---|---|---|---|---|")
-    styles = {"overall": "-o", "drawer": "--s", "door": ":^"}
-    for hand, rows in sorted(by_hand.items()):
+    print("| hand | series | demos | overall | drawers | doors |\n|---|---|---|---|---|---|")
+    styles = {"overall": ("-o", 2.0), "drawer": ("--s", 0.8), "door": (":^", 0.8)}
+    planner_drawn = set()
+    for i, ((hand, series), rows) in enumerate(sorted(by_hand.items())):
         rows.sort()
         ns = [n for n, _ in rows]
-        for kind, style in styles.items():
+        colour = f"C{i}"
+        name = f"{hand} {series}".strip()
+        for kind, (style, width) in styles.items():
             ks = [r[kind] for _, r in rows]
             p = [100 * k / n if n else 0 for k, n in ks]
-            lo = [100 * wilson(k, n)[0] for k, n in ks]
-            hi = [100 * wilson(k, n)[1] for k, n in ks]
-            line, = ax.plot(ns, p, style, label=f"{hand} {kind}")
+            ax.plot(ns, p, style, color=colour, lw=width, ms=6 if kind == "overall" else 4,
+                    label=f"{name}: {kind}")
             if kind == "overall":
-                ax.fill_between(ns, lo, hi, alpha=0.15, color=line.get_color())
+                lo = [100 * wilson(k, n)[0] for k, n in ks]
+                hi = [100 * wilson(k, n)[1] for k, n in ks]
+                ax.fill_between(ns, lo, hi, alpha=0.12, color=colour)
         for n, r in rows:
             cells = " | ".join(f"{100 * k / m:.1f} % ({k}/{m})" if m else "-" for k, m in r.values())
-            print(f"| {hand} | {n} | {cells} |")
-        if hand in planner:
+            print(f"| {hand} | {series or '-'} | {n} | {cells} |")
+        if hand in planner and hand not in planner_drawn:
+            planner_drawn.add(hand)
             k, m = planner[hand]["overall"]
             ax.axhline(100 * k / m, color="grey", lw=1, ls="-.", label=f"{hand} planner (same solver)")
-            print(f"| {hand} | planner | " + " | ".join(f"{100 * k / m:.1f} % ({k}/{m})" if m else "-"
+            print(f"| {hand} | planner | | " + " | ".join(f"{100 * k / m:.1f} % ({k}/{m})" if m else "-"
                                                        for k, m in planner[hand].values()) + " |")
     ax.set_xscale("log")
     from matplotlib.ticker import NullFormatter
@@ -103,7 +109,7 @@ def main(argv=None) -> None:
     ax.set_ylim(0, 100)
     ax.grid(alpha=0.3)
     ax.set_title(args.title, fontsize=10)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(0.0, 0.95))
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=120)
