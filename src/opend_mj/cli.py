@@ -28,6 +28,8 @@ COMMANDS: dict[str, str] = {
     "view": "opend_mj.commands.teleop:view",
     "teleop": "opend_mj.commands.teleop:teleop",
     "replay": "opend_mj.commands.teleop:replay",
+    "demos": "opend_mj.commands.demos:demos",
+    "train-policy": "opend_mj.commands.demos:train_policy",
 }
 
 

@@ -16,6 +16,8 @@ The robomimic / LIBERO layout, in HDF5 (``.hdf5`` / ``.h5``, needs ``h5py``) or 
     data/demo_<i>/obs/open_ratio            float64 (T,): target open ratio before step t
     data/demo_<i>/obs/rgb                   uint8 (T, H, W, 3), only when the env config has RGB-D on
     data/demo_<i>/final/<key>               the same observation keys after the last step (1 sample)
+    data/demo_<i>/<name>                    other per-step arrays of a recorder (``Demo.extra``), e.g.
+                                            ``actions_delta`` of `opend demos` (apps.planner_demos)
     data/demo_<i>  attrs                    instruction, cabinet (id), cabinet_dir, target_joint,
                                             target_type, hand, seed, room (resolved preset index),
                                             success, open_ratio (final), joint_value (final),
@@ -61,6 +63,8 @@ class Demo:
     obs: dict[str, np.ndarray]
     attrs: dict
     final: dict[str, np.ndarray] = field(default_factory=dict)
+    #: further per-step arrays stored beside ``actions`` (``data/demo_<i>/<name>``)
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def num_samples(self) -> int:
@@ -187,10 +191,7 @@ def read_demos(path) -> tuple[dict, list[Demo]]:
             demos = []
             for name in sorted(g.keys(), key=lambda s: int(s.split("_")[1])):
                 d = g[name]
-                demos.append(Demo(actions=d["actions"][()],
-                                  obs={k: d["obs"][k][()] for k in d["obs"]},
-                                  final={k: d["final"][k][()] for k in d["final"]} if "final" in d else {},
-                                  attrs={k: _h5_value(v) for k, v in d.attrs.items()}))
+                demos.append(_h5_demo(d))
         return file_attrs, demos
     with np.load(path, allow_pickle=False) as z:
         files = {k: z[k] for k in z.files}
@@ -202,8 +203,18 @@ def read_demos(path) -> tuple[dict, list[Demo]]:
         demos.append(Demo(actions=files[pre + "actions"],
                           obs={k[len(pre + "obs/"):]: v for k, v in files.items() if k.startswith(pre + "obs/")},
                           final={k[len(pre + "final/"):]: v for k, v in files.items() if k.startswith(pre + "final/")},
-                          attrs=json.loads(str(files[pre + ".attrs"]))))
+                          attrs=json.loads(str(files[pre + ".attrs"])),
+                          extra={k[len(pre):]: v for k, v in files.items() if k.startswith(pre) and "/" not in
+                                 k[len(pre):] and k[len(pre):] not in ("actions", ".attrs")}))
     return file_attrs, demos
+
+
+def _h5_demo(d) -> Demo:
+    """A demo from its HDF5 group."""
+    return Demo(actions=d["actions"][()], obs={k: d["obs"][k][()] for k in d["obs"]},
+                final={k: d["final"][k][()] for k in d["final"]} if "final" in d else {},
+                attrs={k: _h5_value(v) for k, v in d.attrs.items()},
+                extra={k: d[k][()] for k in d if k not in ("actions", "obs", "final")})
 
 
 def _h5_value(v):
@@ -245,15 +256,7 @@ def write_demos(path, demos: list[Demo], config=None, append: bool = True) -> Pa
             g = f.create_group("data")
             g.attrs.update(file_attrs)
             for i, d in enumerate(all_demos):
-                dg = g.create_group(f"demo_{i}")
-                dg.create_dataset("actions", data=np.asarray(d.actions))
-                og = dg.create_group("obs")
-                for k, v in d.obs.items():
-                    og.create_dataset(k, data=np.asarray(v))
-                fg = dg.create_group("final")
-                for k, v in d.final.items():
-                    fg.create_dataset(k, data=np.asarray(v))
-                dg.attrs.update({k: v for k, v in d.attrs.items()})
+                _h5_write_demo(g, i, d)
     else:
         arrays = {"data/.attrs": np.array(json.dumps(file_attrs))}
         for i, d in enumerate(all_demos):
@@ -264,9 +267,53 @@ def write_demos(path, demos: list[Demo], config=None, append: bool = True) -> Pa
                 arrays[pre + "obs/" + k] = np.asarray(v)
             for k, v in d.final.items():
                 arrays[pre + "final/" + k] = np.asarray(v)
+            for k, v in d.extra.items():
+                arrays[pre + k] = np.asarray(v)
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
     os.replace(tmp, path)
+    return path
+
+
+def _h5_write_demo(g, i: int, d: Demo) -> None:
+    dg = g.create_group(f"demo_{i}")
+    dg.create_dataset("actions", data=np.asarray(d.actions))
+    for k, v in d.extra.items():
+        dg.create_dataset(k, data=np.asarray(v))
+    og = dg.create_group("obs")
+    for k, v in d.obs.items():
+        v = np.asarray(v)
+        og.create_dataset(k, data=v, **({"compression": "gzip", "compression_opts": 4} if v.ndim >= 3 else {}))
+    fg = dg.create_group("final")
+    for k, v in d.final.items():
+        fg.create_dataset(k, data=np.asarray(v))
+    dg.attrs.update({k: v for k, v in d.attrs.items()})
+
+
+def append_demos(path, demos: list[Demo]) -> Path:
+    """Add demos to ``path`` in place (HDF5: only the new groups are written, so a long recording
+    stays linear in time; ``.npz``: rewritten by :func:`write_demos`). The demos carry their env
+    config (``env_args``), which must be the file's."""
+    path = Path(path)
+    if not _is_hdf5(path):
+        return write_demos(path, demos, append=True)
+    h5py = _h5py()
+    args = json.loads(json.dumps(getattr(demos[0], "env_args")))
+    if any(json.loads(json.dumps(getattr(d, "env_args", args))) != args for d in demos):
+        raise ValueError("demos recorded with different env configs cannot share one file")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with h5py.File(path, "a") as f:
+        if "data" not in f:
+            g = f.create_group("data")
+            g.attrs.update({"total": 0, "env_args": json.dumps(args), "format": FORMAT,
+                            "format_version": FORMAT_VERSION})
+        g = f["data"]
+        if json.loads(_h5_value(g.attrs["env_args"])) != args:
+            raise ValueError(f"{path}: its demos were recorded with another env config")
+        start = len([k for k in g.keys() if k.startswith("demo_")])
+        for i, d in enumerate(demos):
+            _h5_write_demo(g, start + i, d)
+        g.attrs["total"] = int(g.attrs["total"]) + int(sum(d.num_samples for d in demos))
     return path
 
 
@@ -320,5 +367,5 @@ def replay_demo(demo: Demo, args: dict | str, cabinet_dir: Path | None = None) -
         env.close()
 
 
-__all__ = ["Demo", "DemoRecorder", "FORMAT", "OBS_KEYS", "ReplayResult", "env_args", "load_demo", "read_demos",
+__all__ = ["Demo", "DemoRecorder", "append_demos", "FORMAT", "OBS_KEYS", "ReplayResult", "env_args", "load_demo", "read_demos",
            "replay_demo", "task_config_from_args", "write_demos"]

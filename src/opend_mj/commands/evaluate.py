@@ -77,9 +77,10 @@ def _check_cabinets(ctx, param, value):
 @click.option("--physics-timestep", "physics_timestep", default=None, callback=_check_timestep,
               help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
                    "see BENCHMARKS.md for success and penetration at each.")
-@click.option("--policy", default=None, metavar="module:Class|file.py[:Class]",
+@click.option("--policy", default=None, metavar="bc|module:Class|file.py[:Class]",
               help="Evaluate this agent instead of the planner (see README, Evaluation protocol); "
-                   "its name is the results' solver column.")
+                   "its name is the results' solver column. bc: the behaviour-cloning policy "
+                   "(checkpoints/bc_<hand>.pt; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
 @click.option("--wait", is_flag=True, default=False,

@@ -8,8 +8,9 @@ seconds of simulated time (900 steps at 60 Hz) or until it returns None; then th
 reads the final state. Ground truth is read here only to label the record (failure stage, the
 closest the grasp site came to the handle).
 
-An agent is named ``module:Class``, ``path/to/file.py:Class`` or ``path/to/file.py`` (its class
-``Agent``); ``--policy-arg key=value`` are passed to the constructor. One agent instance per worker
+An agent is named ``module:Class``, ``path/to/file.py:Class``, ``path/to/file.py`` (its class
+``Agent``) or by a built-in name (`BUILTIN_POLICIES`: ``bc``, the behaviour-cloning policy);
+``--policy-arg key=value`` are passed to the constructor. One agent instance per worker
 process and spec, reset at every episode.
 """
 
@@ -38,6 +39,9 @@ PROTOCOL_TIME_LIMIT = 15.0
 
 _LOADED: dict[tuple, object] = {}
 
+#: Agents shipped with the package, by short name (``opend run --policy bc``).
+BUILTIN_POLICIES = {"bc": "opend_mj.policy.bc:BCAgent"}
+
 
 def parse_policy_args(items) -> tuple[tuple[str, object], ...]:
     """``("k=v", ...)`` -> ``(("k", v), ...)``; a value is JSON where it parses (numbers, true, lists)."""
@@ -56,6 +60,7 @@ def parse_policy_args(items) -> tuple[tuple[str, object], ...]:
 
 def resolve_policy(spec: str) -> tuple[str, str]:
     """``(module or absolute file path, attribute)`` of a policy spec; raises ValueError if not found."""
+    spec = BUILTIN_POLICIES.get(spec, spec)
     target, sep, attr = spec.rpartition(":")
     if not sep:
         target, attr = spec, ""
@@ -223,5 +228,5 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     }
 
 
-__all__ = ["PROTOCOL_TIME_LIMIT", "agent_name", "load_agent", "parse_policy_args", "resolve_policy",
+__all__ = ["BUILTIN_POLICIES", "PROTOCOL_TIME_LIMIT", "agent_name", "load_agent", "parse_policy_args", "resolve_policy",
            "run_agent_episode", "run_agent_group", "run_group"]

@@ -1,0 +1,317 @@
+"""`opend demos`: the planner's episodes recorded as demonstrations, in the agents' own action space.
+
+Each episode is one `opend run` episode (the same jobs, scenes and seeds: `evaluation.jobs`) of the
+planner with a handle solver. Every 60 Hz control step stores what an agent would have observed
+before it (`opend_mj.policy.agents`: the hand's own state and touch, the instruction) and the action
+the planner sent, in both agent action spaces: ``actions`` (the task's absolute action, which
+`opend replay` steps) and ``actions_delta`` (the gymnasium environments' normalised delta action,
+clipped to [-1, 1]). The solver's box and the handle it gives in the first image (`policy.learned.bc`:
+the planner's own back-projection) are stored with every step, and optionally an RGB-D image per step.
+
+The file is the robomimic / LIBERO HDF5 layout of `opend_mj.apps.demos` (see there and the docs
+page ``docs/demonstrations.md`` for the keys). Successful episodes are kept by default; with
+``keep_failures`` the failed ones too, labelled (``success``, ``failed_stage``). Every episode tried
+is logged to ``<out>.episodes.jsonl`` (its key, success, whether kept), which is what a resumed
+recording skips. Episodes run in ``spawn`` worker processes (an EGL context does not survive fork).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from opend_mj.apps.demos import Demo, _episode_json, append_demos, env_args, read_demos
+from opend_mj.evaluation.episode import EpisodeJob
+from opend_mj.evaluation.jobs import group_jobs
+
+#: Per-step observation keys of a planner demonstration (besides optional ``rgb`` / ``depth``).
+DEMO_OBS_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", "grasp_site_pos", "grasp_site_quat",
+                 "mocap_pos", "mocap_quat", "touch", "time", "instruction", "handle_box", "handle_features")
+
+
+@dataclass(frozen=True)
+class RecordConfig:
+    """What `record_demos` keeps."""
+
+    image_size: int = 0  # RGB-D of the front camera at every step, this many pixels square (0: none)
+    keep_failures: bool = False
+
+    def __post_init__(self):
+        if self.image_size and self.image_size < 16:
+            raise ValueError(f"image_size must be 0 (no images) or >= 16, not {self.image_size}")
+
+
+def log_path(out: Path) -> Path:
+    return Path(str(out) + ".episodes.jsonl")
+
+
+def _rotvec(q) -> np.ndarray:
+    """Rotation vector (rad) of a unit quaternion (w x y z), the short way round."""
+    q = np.asarray(q, float)
+    if q[0] < 0:
+        q = -q
+    s = float(np.linalg.norm(q[1:]))
+    if s < 1e-12:
+        return np.zeros(3)
+    return q[1:] / s * 2.0 * math.atan2(s, q[0])
+
+
+class _RecordingEnv:
+    """The scene as the planner steps it, storing the agent's observation and the action of each step."""
+
+    def __init__(self, env, reader, adapter, camera=None):
+        self._env, self._reader, self._adapter, self._camera = env, reader, adapter, camera
+        self.obs: dict[str, list] = {}
+        self.actions: list[np.ndarray] = []
+        self.deltas: list[np.ndarray] = []
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def step(self, action):
+        from opend_mj.evaluation.runner import PhysicsDiverged
+        from opend_mj.transforms import quat_mul
+
+        obs = self._reader.proprio()
+        for k, v in obs.items():
+            self.obs.setdefault(k, []).append(np.array(v, float))
+        if self._camera is not None:
+            rgb, depth = self._camera.render()
+            self.obs.setdefault("rgb", []).append(rgb)
+            self.obs.setdefault("depth", []).append(np.asarray(depth, np.float32))
+        a = np.asarray(action, float)
+        self.actions.append(a.copy())
+        ad = self._adapter
+        conj = obs["mocap_quat"] * np.array([1.0, -1.0, -1.0, -1.0])
+        rot = _rotvec(quat_mul(a[3:7] / np.linalg.norm(a[3:7]), conj))
+        delta = np.concatenate([(a[:3] - obs["mocap_pos"]) / ad.step_pos, rot / ad.step_rot, ad.fingers_to_unit(a[7:])])
+        self.deltas.append(np.clip(delta, -1.0, 1.0))
+        ts = self._env.step(a)
+        if ts.last():
+            raise PhysicsDiverged(f"physics instability: {self._env.task.physics_warnings}")
+        return ts
+
+
+def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfig()) -> tuple[dict, Demo]:
+    """One planner episode of ``job``: (its log line, the demonstration). ``env``: a scene of the
+    job's `scene_key` to reuse (as `opend run` reuses them), else one is made."""
+    from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
+    from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle
+    from opend_mj.policy.planner import GraspProfile, Observation, Planner, PlannerConfig, Robot
+    from opend_mj.policy.solvers import get_solver, needs_ground_truth
+    from opend_mj.sim.camera import RGBDCamera
+    from opend_mj.sim.envs import ActionAdapter, SceneReader, instruction_onehot
+
+    t0 = time.perf_counter()
+    env = env if env is not None else make_episode_env(job)
+    env.task.set_target(job.joint, instruction_for(job))
+    env.reset()
+    task, physics = env.task, env.physics
+    size = task.config.image_size
+    reader = SceneReader(env, size)
+    extra_cam = RGBDCamera(physics, "front", config.image_size, config.image_size) if config.image_size else None
+    try:
+        with RGBDCamera(physics, "front", size, size) as cam:
+            rgb, depth = cam.render()
+            view = task.camera_view(physics)
+            options = {}
+            if needs_ground_truth(job.solver):
+                options["ground_truth"] = lambda: task.handle_boxes(physics)[task.target.joint]
+            solver = get_solver(job.solver, **options)
+            pconfig = PlannerConfig(pull=job.pull)
+            grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
+            if grasp is not None:
+                pconfig = grasp.apply(pconfig)
+            percept = perceive_handle(solver, rgb, depth, task.instruction, view, pconfig)
+            rec = _RecordingEnv(env, reader, ActionAdapter(job.hand, task.config), extra_cam)
+            planner = Planner(solver, task.hand.spec, pconfig, grasp=None)
+            if grasp is not None:
+                planner.grasp = grasp
+            robot = Robot(rec, look=lambda: cam.render()[1])
+            diverged = None
+            try:
+                plan = planner.run(robot, Observation(rgb=rgb, depth=depth, instruction=task.instruction,
+                                                      camera_view=view))
+            except PhysicsDiverged as exc:
+                plan, diverged = None, str(exc)
+    finally:
+        reader.close()
+        if extra_cam is not None:
+            extra_cam.close()
+    outcome = task.outcome(physics)
+    n = len(rec.actions)
+    success = bool(outcome.success) and diverged is None
+    failed = None if success else ("physics" if diverged else (plan.failed_stage or "pull"))
+    box = np.asarray(percept.box.as_tuple() if percept is not None else (np.nan,) * 4, float)
+    feats = percept.vector() if percept is not None else np.full(PERCEPT_DIM, np.nan)
+    obs = {k: np.asarray(v) for k, v in rec.obs.items()}
+    obs["instruction"] = np.repeat(instruction_onehot(task.instruction)[None].astype(np.float64), n, axis=0)
+    obs["handle_box"] = np.repeat(box[None], n, axis=0)
+    obs["handle_features"] = np.repeat(feats[None], n, axis=0)
+    key = list(job.key())
+    attrs = {
+        "instruction": str(task.instruction), "cabinet": job.cabinet, "cabinet_dir": str(Path(job.cabinet_dir).resolve()),
+        "target_joint": job.joint, "target_type": str(task.target.kind), "hand": job.hand, "solver": job.solver,
+        "split": job.split, "seed": int(job.seed), "room": int(task.episode.room_index()), "success": success,
+        "failed_stage": failed or "", "open_ratio": float(outcome.open_ratio), "joint_value": float(outcome.joint_value),
+        "num_samples": n, "episode": _episode_json(task.episode), "sim_seconds": float(physics.data.time),
+        "wall_seconds": float(time.perf_counter() - t0), "job_key": json.dumps(key),
+        "handle_kind": percept.handle.kind if percept is not None else "",
+        "handle_orientation": percept.handle.orientation if percept is not None else "",
+        "hinge_seen": (percept.hinge or "") if percept is not None else "",
+    }
+    demo = Demo(actions=np.asarray(rec.actions, float).reshape(n, -1), obs=obs, attrs=attrs,
+                final={k: np.asarray(v)[None] for k, v in reader.proprio().items()},
+                extra={"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1)})
+    demo.env_args = env_args(task.config)  # type: ignore[attr-defined]
+    line = {"key": key, "cabinet": job.cabinet, "joint": job.joint, "hand": job.hand, "solver": job.solver,
+            "seed": job.seed, "split": job.split, "success": success, "failed_stage": failed,
+            "open_ratio": round(float(outcome.open_ratio), 4), "steps": n, "wall_seconds": round(attrs["wall_seconds"], 2)}
+    return line, demo
+
+
+def _record_group(args) -> list[tuple[dict, Demo | None]]:
+    """Worker: the episodes of one scene, one scene built for all (a fresh one after an error)."""
+    from opend_mj.evaluation.runner import error_reason, make_episode_env
+
+    jobs, config = args
+    out, env = [], None
+    for job in jobs:
+        try:
+            env = env or make_episode_env(job)
+            line, demo = record_episode(job, env, config)
+            keep = line["success"] or config.keep_failures
+            line["kept"] = keep
+            out.append((line, demo if keep else None))
+        except Exception as exc:  # noqa: BLE001 (one bad episode must not stop a recording)
+            env = None
+            out.append(({"key": list(job.key()), "cabinet": job.cabinet,
+                         "joint": job.joint, "hand": job.hand, "seed": job.seed, "success": False, "kept": False,
+                         "error": error_reason(exc)}, None))
+    return out
+
+
+def _worker_init() -> None:
+    from opend_mj.backends import worker_init
+
+    worker_init()
+
+
+def record_demos(jobs: list[EpisodeJob], out: Path, workers: int = 1, config: RecordConfig = RecordConfig(),
+                 progress: bool = True, flush_every: int = 16) -> dict:
+    """Record the jobs not yet tried into ``out`` (HDF5; resumable through ``<out>.episodes.jsonl``).
+
+    Returns counts: total, skipped (tried before), ran, kept, success, errors."""
+    from tqdm import tqdm
+
+    out = Path(out)
+    log = log_path(out)
+    done = set()
+    if log.exists():
+        for line in log.read_text().splitlines():
+            if line.strip():
+                done.add(tuple(json.loads(line)["key"]))
+    if out.exists() and not log.exists():
+        _, old = read_demos(out)
+        done |= {tuple(json.loads(d.attrs["job_key"])) for d in old if "job_key" in d.attrs}
+    todo = [j for j in jobs if tuple(j.key()) not in done]
+    counts = {"total": len(jobs), "skipped": len(jobs) - len(todo), "ran": 0, "kept": 0, "success": 0, "errors": 0}
+    if not todo:
+        return counts
+    groups = [(g, config) for g in group_jobs(todo)]
+    pending: list[tuple[dict, Demo | None]] = []
+    bar = tqdm(total=len(todo), desc="demos", unit="ep", disable=not progress)
+
+    def flush():
+        demos = [d for _, d in pending if d is not None]
+        if demos:
+            append_demos(out, demos)
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "a") as f:
+            for line, _ in pending:
+                f.write(json.dumps(line) + "\n")
+        pending.clear()
+
+    def take(results):
+        for line, demo in results:
+            counts["ran"] += 1
+            counts["kept"] += demo is not None
+            counts["success"] += bool(line.get("success"))
+            counts["errors"] += "error" in line
+            pending.append((line, demo))
+            bar.update(1)
+        bar.set_postfix(kept=counts["kept"], success=f"{counts['success']}/{counts['ran']}")
+        if len(pending) >= flush_every:
+            flush()
+
+    try:
+        if workers <= 1:
+            for g in groups:
+                take(_record_group(g))
+        else:
+            import multiprocessing as mp
+
+            with mp.get_context("spawn").Pool(workers, initializer=_worker_init) as pool:
+                for results in pool.imap(_record_group, groups):
+                    take(results)
+    finally:
+        flush()
+        bar.close()
+    return counts
+
+
+#: The observation keys behaviour cloning reads (`policy.learned.bc`).
+TRAINING_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch",
+                 "time", "handle_features")
+
+
+def load_training_demos(paths, max_demos: int | None = None, successes_only: bool = True) -> list[Demo]:
+    """The demos of one or more files with only the keys training reads (float32 where they are float),
+    in file order, at most ``max_demos`` of them (counting the kept ones only)."""
+    from opend_mj.apps.demos import _h5_value, _h5py, _is_hdf5
+
+    out: list[Demo] = []
+    for path in [paths] if isinstance(paths, (str, Path)) else paths:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no demonstrations file; record one with `opend demos --out {path}`")
+        if not _is_hdf5(path):
+            _, demos = read_demos(path)
+            out += [d for d in demos if d.attrs.get("success") or not successes_only]
+            continue
+        with _h5py().File(path, "r") as f:
+            if "data" not in f:
+                raise ValueError(f"{path}: not a demonstrations file (no data group)")
+            g = f["data"]
+            for name in sorted((k for k in g if k.startswith("demo_")), key=lambda k: int(k.split("_")[1])):
+                d = g[name]
+                attrs = {k: _h5_value(v) for k, v in d.attrs.items()}
+                if successes_only and not attrs.get("success"):
+                    continue
+                missing = [k for k in TRAINING_KEYS if k not in d["obs"]]
+                if missing:
+                    raise ValueError(f"{path}: {name} has no obs/{missing[0]} (not recorded by `opend demos`)")
+                obs = {k: d["obs"][k][()].astype(np.float32) for k in TRAINING_KEYS}
+                out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs))
+                if max_demos is not None and len(out) >= max_demos:
+                    return out
+    return out[:max_demos] if max_demos is not None else out
+
+
+def demo_jobs(cabinets_dir, hands, solver: str = "oracle", split: str = "train", seeds=(0,), limit=None,
+              cabinet_ids=None, pull: str = "arc") -> list[EpisodeJob]:
+    """The episodes of a recording: `opend run`'s jobs for every seed."""
+    from opend_mj.evaluation.jobs import make_jobs
+
+    return [job for seed in dict.fromkeys(seeds)
+            for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, limit=limit,
+                                 cabinet_ids=cabinet_ids, pull=pull)]
+
+
+__all__ = ["DEMO_OBS_KEYS", "RecordConfig", "TRAINING_KEYS", "demo_jobs", "load_training_demos", "log_path",
+           "record_demos", "record_episode"]

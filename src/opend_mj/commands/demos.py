@@ -1,0 +1,91 @@
+"""`opend demos` (the planner's episodes as demonstrations) and `opend train-policy` (behaviour cloning)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from opend_mj.commands.evaluate import _check_cabinets, _check_hands, _check_solver
+
+
+@click.command("demos")
+@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True, callback=_check_hands,
+              help="Hand name (repeat for several).")
+@click.option("--solver", default="oracle", show_default=True, callback=_check_solver,
+              help="The planner's handle solver (its box is stored with the demos).")
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="train", show_default=True)
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--cabinet-id", "cabinet_ids", multiple=True, help="Only these cabinets (repeatable).")
+@click.option("--seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Episode seeds 0..N-1 per target (each seed: another room, light and camera).")
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("demos/planner.hdf5"),
+              show_default=True, help="HDF5 file (robomimic / LIBERO layout); appended to, resumable.")
+@click.option("--image-size", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Also store the front camera's RGB-D at every step at this size (0: none).")
+@click.option("--keep-failures", is_flag=True, default=False,
+              help="Keep failed episodes too (attrs success=false and failed_stage say why).")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes (spawned).")
+@click.option("--progress/--no-progress", default=True)
+def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, image_size, keep_failures, workers,
+          progress):
+    """Record the planner's episodes as demonstrations (agent observations and actions at 60 Hz)."""
+    from opend_mj.apps.planner_demos import RecordConfig, demo_jobs, log_path, record_demos
+
+    if out.suffix.lower() not in (".hdf5", ".h5"):
+        raise click.BadParameter(f"{out}: demonstrations are written as HDF5 (.hdf5 or .h5)", param_hint="--out")
+    jobs = demo_jobs(cabinets_dir, hands, solver, split=split, seeds=range(seeds), limit=limit,
+                     cabinet_ids=list(cabinet_ids) or None)
+    if not jobs:
+        raise click.ClickException(f"no episodes: split {split!r} of {cabinets_dir} has no targets")
+    counts = record_demos(jobs, out, workers=workers, config=RecordConfig(image_size=image_size,
+                                                                          keep_failures=keep_failures),
+                          progress=progress)
+    click.echo(f"{counts['ran']} episodes recorded, {counts['skipped']} already tried, {counts['success']} "
+               f"successes, {counts['kept']} kept, {counts['errors']} errors -> {out} (log {log_path(out)})")
+
+
+@click.command("train-policy")
+@click.option("--demos", "demo_files", multiple=True, required=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Demonstrations file (repeatable).")
+@click.option("--hand", default="allegro", show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Checkpoint [checkpoints/bc_<hand>.pt]; a .json summary is written beside it.")
+@click.option("--max-demos", type=click.IntRange(min=1), default=None,
+              help="Train on the first N successful demos of the files only (data-scale studies).")
+@click.option("--steps", type=click.IntRange(min=1), default=None, help="Optimiser steps [3000].")
+@click.option("--batch-size", type=click.IntRange(min=1), default=None, help="[256]")
+@click.option("--lr", type=float, default=None, help="[1e-3]")
+@click.option("--chunk", type=click.IntRange(min=1), default=None, help="Actions per prediction [20].")
+@click.option("--d-model", type=click.IntRange(min=8), default=None, help="Transformer width [64].")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
+@click.option("--device", default="cpu", show_default=True)
+@click.option("--progress/--no-progress", default=True)
+def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, seed, threads, device,
+                 progress):
+    """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
+    import dataclasses
+
+    from opend_mj.apps.planner_demos import load_training_demos
+    from opend_mj.policy.learned.bc import BCConfig
+    from opend_mj.policy.learned.bc_train import train_bc
+
+    changes = {k: v for k, v in dict(steps=steps, batch_size=batch_size, lr=lr, chunk=chunk, d_model=d_model).items()
+               if v is not None}
+    config = dataclasses.replace(BCConfig(seed=seed), **changes)
+    out = out or Path("checkpoints") / f"bc_{hand}.pt"
+    try:
+        demos_list = load_training_demos(list(demo_files), max_demos=max_demos)
+        wrong = {d.attrs.get("hand") for d in demos_list} - {hand}
+        if wrong:
+            raise ValueError(f"the demos are of the {', '.join(sorted(map(str, wrong)))} hand, not {hand}")
+        summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device)
+    except (ValueError, FileNotFoundError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    last = summary["history"][-1] if summary["history"] else {}
+    click.echo(f"{summary['demos']} demos ({summary['samples']} steps, {summary['cabinets']} cabinets), "
+               f"{summary['parameters']} parameters, {summary['seconds']:.0f} s; last {last} -> {out}")

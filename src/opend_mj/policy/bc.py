@@ -1,0 +1,135 @@
+"""The behaviour-cloning agent: `opend run --policy bc` (a checkpoint of `opend train-policy`).
+
+On the first step a shipped handle solver (``fasterrcnn`` by default, or ``cliport``) finds the
+instructed handle in the RGB-D image, and the planner's perception back-projects it
+(`policy.learned.bc.perceive_handle`); from then on, every control step, the transformer reads that
+handle, the instruction and the hand's own state (`policy.learned.bc`) and predicts the next
+``chunk`` actions; the action sent blends every prediction made for this step, oldest weighted most
+(ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). The agent stops
+(returns None) where the solver finds no handle, and at ``stop_time`` (default: the checkpoint's,
+the time by which 95 % of its training demonstrations had ended, holding the opened part; the
+protocol's 15 s limit applies in any case).
+
+Ground truth is never read: the observation is the protocol's (`opend_mj.policy.agents`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from opend_mj.policy.learned.bc import context_features, decode_action, load_policy, step_features
+
+
+def default_checkpoint(hand: str) -> Path:
+    """``checkpoints/bc_<hand>.pt`` here, else in the project's checkout."""
+    rel = Path("checkpoints") / f"bc_{hand}.pt"
+    if rel.is_file():
+        return rel
+    from opend_mj import PROJECT_ROOT
+
+    return PROJECT_ROOT / rel
+
+
+class BCAgent:
+    """A behaviour-cloning policy behind the agent interface (`opend_mj.policy.agents`).
+
+    ``checkpoint``: a file of `opend train-policy` (default ``checkpoints/bc_<hand>.pt``);
+    ``solver``: the handle solver that reads the first image (never one that needs ground truth);
+    ``threads``: torch CPU threads (1 keeps parallel episodes from competing); ``stop_time``: s of
+    simulated time after which the agent stops (default: the checkpoint's ``stop_time``);
+    ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
+    values weight the newest predictions most)."""
+
+    control = "absolute"
+    images = "first"
+
+    def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
+                 name: str | None = None, stop_time: float | None = None, ensemble_decay: float | None = None,
+                 **solver_options):
+        from opend_mj.policy.solvers import needs_ground_truth, solver_factory
+
+        if needs_ground_truth(solver):
+            raise ValueError(f"solver {solver!r} reads the simulator's ground truth, which an agent may not")
+        self._solver_name = solver
+        self._factory = lambda: solver_factory(solver)(**solver_options)
+        self._solver = None
+        self.checkpoint = checkpoint
+        self.threads = int(threads)
+        self.stop_time = stop_time
+        self.ensemble_decay = ensemble_decay
+        self.name = name or f"bc-{solver}"
+        self._episode = None
+
+    @property
+    def solver(self):
+        if self._solver is None:
+            self._solver = self._factory()
+        return self._solver
+
+    def reset(self, episode) -> None:
+        import torch
+
+        torch.set_num_threads(self.threads)
+        path = Path(self.checkpoint) if self.checkpoint else default_checkpoint(episode.hand)
+        self.model, self.config, ckpt = load_policy(path)
+        if ckpt.get("hand") not in (None, episode.hand):
+            raise ValueError(f"{path}: trained for the {ckpt['hand']} hand, not {episode.hand}")
+        self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
+        default = ckpt.get("stop_time", ckpt.get("max_time", episode.time_limit))
+        self._max_time = float(self.stop_time if self.stop_time is not None else default)
+        self._episode = episode
+        self._ctx = None
+        self._centre = None
+        self._steps: list[np.ndarray] = []
+        self._preds: list[np.ndarray] = []  # prediction made at step i (chunk, A), kept while it covers a step
+        self.percept = None
+        self.stopped = None
+
+    def act(self, obs: dict) -> np.ndarray | None:
+        import torch
+
+        if self._ctx is None:
+            if self.stopped:
+                return None
+            from opend_mj.policy.learned.bc import perceive_handle
+
+            self.percept = perceive_handle(self.solver, obs["rgb"], obs["depth"], obs["instruction"],
+                                           self._episode.camera_view)
+            if self.percept is None:
+                self.stopped = "locate"
+                return None
+            vec = self.percept.vector()
+            self._centre = vec[:3]
+            self._ctx = torch.from_numpy(context_features(vec, obs["instruction"]))[None]
+        if float(obs["time"][0]) >= self._max_time:
+            self.stopped = "done"
+            return None
+        one = {k: np.asarray(obs[k], float)[None] for k in ("grasp_site_pos", "grasp_site_quat", "mocap_pos",
+                                                            "mocap_quat", "root_vel", "hand_qpos", "touch", "time")}
+        self._steps.append(step_features(one, self._centre)[0])
+        t = len(self._steps) - 1
+        rows = [max(t - lag, 0) for lag in self.config.lags]
+        steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]
+        with torch.no_grad():
+            chunk = self.model.actions(self._ctx, steps)[0].numpy()
+        self._preds.append(chunk)
+        k = self.config.chunk
+        first = max(0, t - k + 1)
+        covering = [self._preds[i][t - i] for i in range(first, t + 1)]  # oldest first
+        decay = self.config.ensemble_decay if self.ensemble_decay is None else self.ensemble_decay
+        w = np.exp(-decay * np.arange(len(covering)))
+        blended = (np.asarray(covering) * w[:, None]).sum(axis=0) / w.sum()
+        for i in range(first):  # predictions no longer covering any step
+            self._preds[i] = None
+        return decode_action(blended, self._centre, self._low, self._high)
+
+    def episode_info(self) -> dict:
+        """Extra fields for the episode's record: the located box and why the agent stopped."""
+        box = self.percept.box.as_tuple() if self.percept is not None else None
+        return {"box": [round(float(x), 2) for x in box] if box else None, "agent_stop": self.stopped,
+                "handle_kind": self.percept.handle.kind if self.percept is not None else None}
+
+
+__all__ = ["BCAgent", "default_checkpoint"]

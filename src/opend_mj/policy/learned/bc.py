@@ -1,0 +1,254 @@
+"""Behaviour cloning: what the policy reads, what it writes, and the model (a transformer over action chunks).
+
+Inputs (only what the evaluation protocol gives an agent; never ground truth):
+
+* **context** (once per episode, :func:`context_features`): the handle a shipped solver finds in the
+  first RGB-D image, back-projected with the camera intrinsics and the depth at the box
+  (:func:`perceive_handle`: the planner's own perception, `opend_mj.policy.perception`): the 3D grip
+  centre (world, m), bar or knob, horizontal or vertical, its extent (m), how far it stands out of
+  the panel, the free space around it, the side a door hinges on as the depth image shows it; and
+  the instruction's one-hot code (`opend_mj.sim.envs.instruction_onehot`, 14 numbers).
+* **steps** (:func:`step_features`): the hand's own state at the current step and at earlier steps
+  (``lags``): grasp site and commanded root (mocap) positions relative to the perceived handle centre
+  (m), their orientations as the first two columns of the rotation matrix (6 numbers each, continuous
+  where a quaternion flips sign), the root's velocity, the finger joints, touch (N) and the time (s).
+
+Output: a chunk of ``chunk`` future actions (:func:`encode_actions`), each the root target position
+relative to the perceived handle centre (m), the root target orientation (6 numbers) and the finger
+targets mapped to [-1, 1] over their actuator ranges; :func:`decode_action` turns one back into the
+task's absolute action (root position, quaternion w x y z, finger targets). Everything is
+standardised with the training data's mean and spread, stored in the model's buffers.
+
+The model (:class:`ChunkTransformer`) follows ACT (Zhao et al. 2023, "Learning fine-grained bimanual
+manipulation with low-cost hardware") without its CVAE: planner demonstrations are one deterministic
+behaviour per observation, so there is no mode to sample. A transformer encoder reads one context
+token and one token per lag; a decoder turns ``chunk`` learned queries into the action chunk; the
+agent blends the chunks that cover a step with ACT's temporal ensemble.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from opend_mj.transforms import mat_to_quat, quat_to_mat
+
+#: Observation keys a step feature reads (all in the agent's observation, `policy.agents`).
+STEP_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch", "time")
+#: Length of :func:`percept_vector`.
+PERCEPT_DIM = 22
+HINGE_SIDES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Model size, inputs and training settings of the behaviour-cloning policy."""
+
+    chunk: int = 20  # actions predicted per query (1/3 s at 60 Hz)
+    lags: tuple[int, ...] = (0, 4, 12, 30)  # control steps back of each step token
+    d_model: int = 64
+    heads: int = 4
+    enc_layers: int = 2
+    dec_layers: int = 1
+    dropout: float = 0.1
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    batch_size: int = 256
+    steps: int = 3000  # optimiser steps
+    seed: int = 0
+    ensemble_decay: float = 0.01  # ACT's temporal-ensemble weight exp(-decay * age), oldest first
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["lags"] = list(self.lags)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "BCConfig":
+        d = dict(d)
+        d["lags"] = tuple(d["lags"])
+        return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
+
+
+# --------------------------------------------------------------------------------------------------
+# Perception: the solver's box -> a 3D handle (the planner's own steps)
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class HandlePercept:
+    """The handle as the first image shows it: the solver's box (pixels, refined as the planner
+    refines it), the 3D estimate, the measured shape and the hinge side ("left", "right" or None)."""
+
+    box: object  # HandleBox
+    handle: object  # HandleEstimate
+    shape: object  # HandleShape
+    hinge: str | None
+
+    def vector(self) -> np.ndarray:
+        return percept_vector(self)
+
+
+def perceive_handle(solver, rgb, depth, instruction: str, view, planner_config=None) -> HandlePercept | None:
+    """The instructed handle from one RGB-D image through ``solver`` (None where it finds none):
+    the box snapped to depth as the planner snaps a learned solver's, one of a pair of pulls, then
+    back-projected (:func:`opend_mj.policy.perception.estimate_handle`)."""
+    from opend_mj.language import describe_instruction
+    from opend_mj.policy.perception import (
+        estimate_handle,
+        infer_hinge_side,
+        measure_handle,
+        one_of_paired_handles,
+        refine_box_with_depth,
+        snaps_to_depth,
+    )
+    from opend_mj.policy.planner import PlannerConfig
+
+    config = planner_config or PlannerConfig()
+    box = solver.solve(rgb, depth, instruction, view)
+    if box is None:
+        return None
+    if config.refine_with_depth and snaps_to_depth(solver, box):
+        box = refine_box_with_depth(box, depth, view)
+    if config.one_of_paired_handles:
+        single = one_of_paired_handles(box, depth)
+        box = single if single is not None else box
+    handle = estimate_handle(box, depth, view, config)
+    if handle is None:
+        return None
+    shape = measure_handle(handle, box, depth, view)
+    hinge = infer_hinge_side(handle, depth, view) if describe_instruction(instruction).kind == "door" else None
+    return HandlePercept(box=box, handle=handle, shape=shape, hinge=hinge)
+
+
+def percept_vector(p: HandlePercept) -> np.ndarray:
+    """``PERCEPT_DIM`` numbers: centre (3, world m), horizontal/vertical, bar/knob, extent y/z (m),
+    handle front and panel relative to the centre along x (m), hinge left/right/unknown, thickness,
+    length, gap, protrusion (m), free space up/down/left/right (m)."""
+    h, s = p.handle, p.shape
+    c = np.asarray(h.centre, float)
+    hinge = [float(p.hinge == side) for side in HINGE_SIDES] + [float(p.hinge not in HINGE_SIDES)]
+    clear = [float(s.clear.get(k, 0.15)) for k in ("up", "down", "left", "right")]
+    v = np.concatenate([c, [h.orientation == "horizontal", h.orientation == "vertical", h.kind == "bar",
+                            h.kind == "knob"], np.asarray(h.size, float), [h.front_x - c[0], h.panel_x - c[0]],
+                        hinge, [s.thickness, s.length, s.gap, s.protrusion], clear]).astype(np.float64)
+    assert v.shape == (PERCEPT_DIM,)
+    return v
+
+
+def context_features(percept_vec: np.ndarray, instruction: str) -> np.ndarray:
+    """The episode's context: the percept vector and the instruction's one-hot code."""
+    from opend_mj.sim.envs import instruction_onehot
+
+    return np.concatenate([np.asarray(percept_vec, float), instruction_onehot(instruction)]).astype(np.float32)
+
+
+# --------------------------------------------------------------------------------------------------
+# Step features and actions
+# --------------------------------------------------------------------------------------------------
+def rot6(quats: np.ndarray) -> np.ndarray:
+    """(T, 4) quaternions (w x y z) -> (T, 6): the rotation matrices' first two columns."""
+    q = np.asarray(quats, float).reshape(-1, 4)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w),
+                     2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)], axis=1)
+
+
+def quat_from_rot6(v: np.ndarray) -> np.ndarray:
+    """The quaternion (w x y z) of the rotation whose first two columns ``v`` approximates (Gram-Schmidt)."""
+    a, b = np.asarray(v[:3], float), np.asarray(v[3:6], float)
+    x = a / max(np.linalg.norm(a), 1e-9)
+    b = b - (x @ b) * x
+    y = b / max(np.linalg.norm(b), 1e-9)
+    m = np.stack([x, y, np.cross(x, y)], axis=1)
+    q = mat_to_quat(m)
+    return q / np.linalg.norm(q)
+
+
+def step_features(obs: dict, centre) -> np.ndarray:
+    """(T, S) features of T observations (each key (T, ...)) relative to the handle ``centre``."""
+    c = np.asarray(centre, float)
+    parts = [np.asarray(obs["grasp_site_pos"], float) - c, rot6(obs["grasp_site_quat"]),
+             np.asarray(obs["mocap_pos"], float) - c, rot6(obs["mocap_quat"])]
+    parts += [np.asarray(obs[k], float).reshape(len(parts[0]), -1) for k in ("root_vel", "hand_qpos", "touch", "time")]
+    return np.concatenate(parts, axis=1).astype(np.float32)
+
+
+def lag_index(t: np.ndarray, lags) -> np.ndarray:
+    """(N, L) indices of the steps ``lags`` before steps ``t`` (the first step where there is none)."""
+    return np.maximum(np.asarray(t)[:, None] - np.asarray(lags)[None, :], 0)
+
+
+def encode_actions(actions: np.ndarray, centre, finger_low, finger_high) -> np.ndarray:
+    """(T, 7 + n) task actions -> (T, 9 + n): root position - centre, rot6, fingers in [-1, 1]."""
+    a = np.asarray(actions, float)
+    span = np.maximum(np.asarray(finger_high) - np.asarray(finger_low), 1e-12)
+    fingers = 2.0 * (a[:, 7:] - finger_low) / span - 1.0
+    return np.concatenate([a[:, :3] - np.asarray(centre, float), rot6(a[:, 3:7]), fingers], axis=1).astype(np.float32)
+
+
+def decode_action(v: np.ndarray, centre, finger_low, finger_high) -> np.ndarray:
+    """One encoded action -> the task's absolute action (root pos, quat w x y z, finger targets)."""
+    v = np.asarray(v, float)
+    low, high = np.asarray(finger_low, float), np.asarray(finger_high, float)
+    fingers = low + (np.clip(v[9:], -1.0, 1.0) + 1.0) * 0.5 * (high - low)
+    return np.concatenate([v[:3] + np.asarray(centre, float), quat_from_rot6(v[3:9]), fingers])
+
+
+# --------------------------------------------------------------------------------------------------
+# The model
+# --------------------------------------------------------------------------------------------------
+def build_model(ctx_dim: int, step_dim: int, act_dim: int, config: BCConfig):
+    """A :class:`ChunkTransformer` (imports torch on first use)."""
+    import torch
+    from torch import nn
+
+    class ChunkTransformer(nn.Module):
+        """Context token + one token per lag -> encoder; ``chunk`` queries -> decoder -> actions."""
+
+        def __init__(self):
+            super().__init__()
+            d, c = config.d_model, config
+            self.ctx_in = nn.Sequential(nn.Linear(ctx_dim, d), nn.GELU(), nn.Linear(d, d))
+            self.step_in = nn.Sequential(nn.Linear(step_dim, d), nn.GELU(), nn.Linear(d, d))
+            self.token_pos = nn.Parameter(torch.randn(1 + len(c.lags), d) * 0.02)
+            self.queries = nn.Parameter(torch.randn(c.chunk, d) * 0.02)
+            enc = nn.TransformerEncoderLayer(d, c.heads, 4 * d, c.dropout, batch_first=True, norm_first=True)
+            dec = nn.TransformerDecoderLayer(d, c.heads, 4 * d, c.dropout, batch_first=True, norm_first=True)
+            self.encoder = nn.TransformerEncoder(enc, c.enc_layers, enable_nested_tensor=False)
+            self.decoder = nn.TransformerDecoder(dec, c.dec_layers)
+            self.head = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, act_dim))
+            for name, dim in (("ctx", ctx_dim), ("step", step_dim), ("act", act_dim)):
+                self.register_buffer(f"{name}_mean", torch.zeros(dim))
+                self.register_buffer(f"{name}_std", torch.ones(dim))
+
+        def forward(self, ctx, steps):
+            """ctx (B, C), steps (B, L, S), both raw -> (B, chunk, A) standardised actions."""
+            x0 = self.ctx_in((ctx - self.ctx_mean) / self.ctx_std)[:, None]
+            xs = self.step_in((steps - self.step_mean) / self.step_std)
+            memory = self.encoder(torch.cat([x0, xs], dim=1) + self.token_pos)
+            q = self.queries.expand(len(ctx), -1, -1)
+            return self.head(self.decoder(q, memory))
+
+        def actions(self, ctx, steps):
+            """Raw (de-standardised) encoded actions."""
+            return self(ctx, steps) * self.act_std + self.act_mean
+
+    return ChunkTransformer()
+
+
+def load_policy(path, device: str = "cpu"):
+    """``(model in eval mode, BCConfig, checkpoint dict)`` of a checkpoint written by training."""
+    from opend_mj.policy.learned import load_checkpoint
+
+    def build(ckpt):
+        config = BCConfig.from_dict(ckpt["config"])
+        dims = ckpt["dims"]
+        return build_model(dims["ctx"], dims["step"], dims["act"], config), config
+
+    return load_checkpoint(path, "checkpoints/bc_allegro.pt", "behaviour-cloning policy",
+                           "opend train-policy", build, device=device)
+
+
+__all__ = ["BCConfig", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
+           "decode_action", "encode_actions", "lag_index", "load_policy", "perceive_handle", "percept_vector",
+           "quat_from_rot6", "rot6", "step_features"]

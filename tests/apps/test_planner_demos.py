@@ -1,0 +1,129 @@
+"""`opend demos` (the planner's episodes as demonstrations), `opend train-policy` and `opend run --policy bc`."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from opend_mj.cli import main
+
+
+@pytest.fixture(scope="module")
+def demos_file(small_dataset, tmp_path_factory):
+    """Two franka demos of the small dataset, recorded through the command line."""
+    out = tmp_path_factory.mktemp("demos") / "franka.hdf5"
+    args = ["demos", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka", "--limit", "2",
+            "--out", str(out), "--no-progress"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    return out, args
+
+
+def test_demos_read_back_with_the_documented_keys(demos_file):
+    from opend_mj.apps.demos import read_demos
+    from opend_mj.apps.planner_demos import DEMO_OBS_KEYS
+    from opend_mj.sim.hands import load_spec
+
+    out, _ = demos_file
+    attrs, demos = read_demos(out)
+    assert attrs["format"] == "opend-mj-demos" and json.loads(attrs["env_args"])["env_name"] == "OpenCabinet"
+    assert len(demos) == 2 and attrs["total"] == sum(d.num_samples for d in demos)
+    n_fingers = len(load_spec("franka").actuator_names)
+    for d in demos:
+        t = d.num_samples
+        assert t > 60  # over a second at 60 Hz
+        assert set(DEMO_OBS_KEYS) <= set(d.obs) and "open_ratio" not in d.obs  # no ground truth
+        assert d.actions.shape == (t, 7 + n_fingers) and d.extra["actions_delta"].shape == (t, 6 + n_fingers)
+        assert np.abs(d.extra["actions_delta"]).max() <= 1.0
+        for key in DEMO_OBS_KEYS:
+            assert len(d.obs[key]) == t, key
+        assert np.allclose(np.diff(d.obs["time"][:, 0]), 1 / 60)
+        assert d.obs["handle_features"].shape == (t, 22) and np.isfinite(d.obs["handle_features"]).all()
+        assert d.obs["instruction"].shape == (t, 14) and (d.obs["instruction"].sum(axis=1) == 3).all()
+        for key in ("instruction", "cabinet", "target_joint", "target_type", "hand", "solver", "split", "seed",
+                    "success", "failed_stage", "open_ratio", "joint_value", "episode", "job_key"):
+            assert key in d.attrs, key
+        assert d.attrs["success"] and d.attrs["solver"] == "oracle" and d.attrs["open_ratio"] > 0.2
+
+
+def test_delta_actions_are_the_absolute_ones_in_the_gym_action_space(demos_file):
+    """Applied to the commanded pose before each step, the delta action gives the absolute one."""
+    from opend_mj.apps.demos import read_demos, task_config_from_args
+    from opend_mj.sim.envs import ActionAdapter
+
+    out, _ = demos_file
+    attrs, demos = read_demos(out)
+    adapter = ActionAdapter("franka", task_config_from_args(attrs["env_args"]))
+    d = demos[0]
+    delta = d.extra["actions_delta"]
+    inside = np.abs(delta[:, :6]).max(axis=1) < 0.999  # steps whose root motion was not clipped
+    assert inside.mean() > 0.5
+    for t in np.flatnonzero(inside)[::25]:
+        back = adapter.from_delta(delta[t], d.obs["mocap_pos"][t], d.obs["mocap_quat"][t])
+        a = d.actions[t]
+        assert np.allclose(back[:3], a[:3], atol=1e-9)
+        assert min(np.abs(back[3:7] - a[3:7]).max(), np.abs(back[3:7] + a[3:7]).max()) < 1e-6
+        assert np.allclose(back[7:], np.clip(a[7:], adapter.finger_low, adapter.finger_high), atol=1e-9)
+
+
+def test_replaying_a_demo_reproduces_its_open_ratio(demos_file):
+    from opend_mj.apps.demos import read_demos, replay_demo
+
+    out, _ = demos_file
+    attrs, demos = read_demos(out)
+    for d in demos:
+        r = replay_demo(d, attrs["env_args"])
+        assert r.error <= 1e-9 and r.success
+    # and through the command line
+    result = CliRunner().invoke(main, ["replay", str(out), "--demo", "1"])
+    assert result.exit_code == 0 and "OK" in result.output, result.output
+
+
+def test_demos_resume_and_refuse_bad_output(demos_file, tmp_path):
+    out, args = demos_file
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0 and "0 episodes recorded, 2 already tried" in again.output
+    bad = CliRunner().invoke(main, args[:-3] + ["--out", str(tmp_path / "x.json")])
+    assert bad.exit_code != 0 and "HDF5" in bad.output
+
+
+def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path):
+    """A tiny policy trains from the demos (deterministically) and `opend run --policy bc` scores it."""
+    import torch
+
+    from opend_mj.evaluation.results import load_results
+
+    out, _ = demos_file
+    ckpts = []
+    for name in ("a", "b"):
+        ckpt = tmp_path / f"bc_{name}.pt"
+        result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(ckpt),
+                                           "--steps", "20", "--batch-size", "16", "--d-model", "16", "--no-progress"])
+        assert result.exit_code == 0, result.output
+        ckpts.append(torch.load(ckpt, weights_only=False))
+    summary = json.loads((tmp_path / "bc_a.json").read_text())
+    assert summary["demos"] == 2 and summary["hand"] == "franka" and summary["history"][-1]["step"] == 20
+    for key, value in ckpts[0]["model"].items():
+        assert torch.equal(value, ckpts[1]["model"][key]), key  # same seed, same weights
+    wrong = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "allegro",
+                                      "--out", str(tmp_path / "x.pt"), "--steps", "1"])
+    assert wrong.exit_code != 0 and "franka" in wrong.output
+
+    results = tmp_path / "bc.jsonl"
+    args = ["run", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka", "--limit", "1",
+            "--out", str(results), "--policy", "bc", "--policy-arg", f"checkpoint={tmp_path / 'bc_a.pt'}"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    (record,) = load_results(results)
+    assert "error" not in record, record.get("error_reason")
+    assert record["solver"] == "bc-fasterrcnn" and record["agent_stopped"]
+    assert record["agent_stop"] in ("done", "locate") and isinstance(record["success"], bool)
+    assert summary["stop_time"] <= summary["max_time"]
+    assert record["sim_seconds"] <= summary["stop_time"] + 1 / 60 + 1e-6
+    score = CliRunner().invoke(main, ["score", str(results)])
+    assert score.exit_code == 0 and "bc-fasterrcnn" in score.output, score.output
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0 and "0 episodes run, 1 already done" in again.output

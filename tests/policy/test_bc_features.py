@@ -1,0 +1,54 @@
+"""The behaviour-cloning policy's inputs and outputs (`policy.learned.bc`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from opend_mj.policy.learned.bc import (
+    BCConfig,
+    decode_action,
+    encode_actions,
+    lag_index,
+    quat_from_rot6,
+    rot6,
+)
+from opend_mj.transforms import quat_to_mat
+
+
+def _unit_quats(n, seed=0):
+    q = np.random.default_rng(seed).normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def test_rot6_is_the_matrix_first_two_columns_and_inverts():
+    q = _unit_quats(20)
+    r = rot6(q)
+    for qi, ri in zip(q, r):
+        assert np.allclose(ri, quat_to_mat(qi)[:, :2].T.ravel())
+        back = quat_from_rot6(ri)
+        assert min(np.abs(back - qi).max(), np.abs(back + qi).max()) < 1e-9  # q and -q: one rotation
+    assert np.allclose(rot6(q), rot6(-q))  # continuous where a quaternion flips sign
+
+
+def test_actions_encode_and_decode_back():
+    rng = np.random.default_rng(1)
+    low, high = -np.ones(4) * 0.3, np.ones(4) * 1.2
+    q = _unit_quats(5, 2)
+    actions = np.concatenate([rng.normal(size=(5, 3)), q, rng.uniform(low, high, size=(5, 4))], axis=1)
+    centre = np.array([0.5, -0.2, 0.9])
+    enc = encode_actions(actions, centre, low, high)
+    assert enc.shape == (5, 3 + 6 + 4) and np.abs(enc[:, 9:]).max() <= 1.0 + 1e-6
+    for a, e in zip(actions, enc):
+        back = decode_action(e, centre, low, high)
+        assert np.allclose(back[:3], a[:3], atol=1e-6) and np.allclose(back[7:], a[7:], atol=1e-5)
+        assert min(np.abs(back[3:7] - a[3:7]).max(), np.abs(back[3:7] + a[3:7]).max()) < 1e-5
+
+
+def test_lags_start_at_the_first_step():
+    idx = lag_index(np.array([0, 3, 40]), (0, 4, 12))
+    assert idx.tolist() == [[0, 0, 0], [3, 0, 0], [40, 36, 28]]
+
+
+def test_config_round_trips():
+    c = BCConfig(chunk=7, lags=(0, 2))
+    assert BCConfig.from_dict(c.to_dict()) == c
