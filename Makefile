@@ -62,7 +62,8 @@ eval-real: install
 	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver $(SOLVER) --split $(SPLIT) \
 		--workers $(WORKERS) --cabinets $(REAL_CABINETS) $(RUN_ARGS) --out $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl
 	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl --csv $(REAL_OUT)/$(SOLVER)_scores$(TAG).csv \
-		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json
+		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json \
+		--manifest $(REAL_CABINETS)/manifest.json
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

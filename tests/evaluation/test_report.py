@@ -77,3 +77,17 @@ def test_report_and_readme_table(tmp_path):
     assert update_readme(plain, table) is False
     with pytest.raises(ValueError, match="no results-table markers"):
         write_report(results, tmp_path / "docs" / "results.md", plain)
+
+
+def test_excluded_targets_count_as_failures(tmp_path):
+    manifest = tmp_path / "manifest.json"
+    manifest.write_text(json.dumps({"excluded_targets": [
+        {"id": "c3", "joint": "joint_0", "type": "drawer", "reason": "jammed", "message": "m"}]}))
+    path = write_summary(RECORDS, tmp_path / "s.json", manifest=manifest)
+    payload = json.loads(path.read_text())
+    assert payload["targets"] == 5 and payload["excluded_targets"] == 1
+    assert payload["scores"]["oracle"]["allegro"]["overall"] == {"episodes": 5, "open20": 2, "open50": 1,
+                                                                  "range75": 1}
+    manifest.write_text("{not json")
+    with pytest.raises(ValueError, match="manifest.json"):
+        write_summary(RECORDS, tmp_path / "s.json", manifest=manifest)

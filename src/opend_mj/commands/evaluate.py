@@ -153,7 +153,9 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
 @click.option("--summary", "summary_path", type=click.Path(path_type=Path), default=None,
               help="also write per-hand aggregates (counts only, no cabinet ids) as JSON, e.g. "
                    "results/real/oracle_all.json for `opend report`")
-def score(results, csv_path, plot_path, summary_path):
+@click.option("--manifest", "manifest_path", type=click.Path(exists=True, path_type=Path), default=None,
+              help="with --summary: the build's manifest.json; the targets it excluded count as failures")
+def score(results, csv_path, plot_path, summary_path, manifest_path):
     """The paper's tables from one or more results files (Markdown to stdout)."""
     from opend_mj.evaluation.scoring import (
         load_records,
@@ -171,7 +173,10 @@ def score(results, csv_path, plot_path, summary_path):
     if summary_path:
         from opend_mj.evaluation.report import write_summary
 
-        write_summary(records, summary_path, label=" ".join(str(p) for p in results))
+        try:
+            write_summary(records, summary_path, label=" ".join(str(p) for p in results), manifest=manifest_path)
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from exc
 
 
 @click.command("report")

@@ -59,14 +59,35 @@ def summarize(records: list[dict]) -> dict:
     return out
 
 
-def write_summary(records: list[dict], path: Path, label: str = "") -> Path:
-    """Write :func:`summarize` of ``records`` as JSON (with how many cabinets and targets it covers)."""
+def excluded_as_failures(records: list[dict], manifest: Path) -> list[dict]:
+    """One failed record per (solver, hand, seed) of ``records`` for every target the build excluded
+    (``manifest.json``'s ``excluded_targets``: parts that cannot be opened in their room), so that a
+    score over a source set counts them as failures instead of leaving them out."""
+    manifest = Path(manifest)
+    try:
+        excluded = json.loads(manifest.read_text()).get("excluded_targets", [])
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{manifest}: cannot read the build's manifest ({exc})") from exc
+    runs = sorted({(r["solver"], r["hand"], int(r.get("seed", 0))) for r in records})
+    return [{"cabinet": t["id"], "joint": t["joint"], "target_type": t.get("type"), "solver": solver,
+             "hand": hand, "seed": seed, "open_ratio": 0.0, "range_ratio": 0.0, "success": False,
+             "failed_stage": "excluded", "excluded_reason": t.get("reason")}
+            for t in excluded for solver, hand, seed in runs]
+
+
+def write_summary(records: list[dict], path: Path, label: str = "", manifest: Path | None = None) -> Path:
+    """Write :func:`summarize` of ``records`` as JSON (with how many cabinets and targets it covers).
+
+    ``manifest``: the build's manifest; its excluded targets count as failed episodes."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    extra = excluded_as_failures(records, manifest) if manifest is not None else []
+    records = list(records) + extra
     payload = {
         "label": label,
         "cabinets": len({r["cabinet"] for r in records}),
         "targets": len({(r["cabinet"], r["joint"]) for r in records}),
+        "excluded_targets": len({(r["cabinet"], r["joint"]) for r in extra}),
         "seeds": sorted({int(r.get("seed", 0)) for r in records}),
         "scores": summarize(records),
     }
@@ -186,9 +207,11 @@ def results_markdown(results_dir: Path) -> str:
             out += [f"Generated test split (`{rs.command} --out results/{rs.generated}`):", ""]
             out += _detail_table(generated, rs.solver) + [""]
         if real:
-            out += [f"Real cabinets ({meta.get('cabinets')} cabinets, {meta.get('targets')} targets; "
+            out += [f"Real cabinets ({meta.get('cabinets')} cabinets, {meta.get('targets')} targets, "
+                    f"{meta.get('excluded_targets', 0)} of them excluded by the build's feasibility check and "
+                    f"counted as failures; "
                     f"`make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl "
-                    f"--summary results/real/{rs.real}`):", ""]
+                    f"--summary results/real/{rs.real} --manifest build/opend-train/manifest.json`):", ""]
             out += _detail_table(real, rs.solver) + [""]
     rows = []
     for name, title in CONDITIONS:
