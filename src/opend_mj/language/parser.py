@@ -97,6 +97,8 @@ def normalise(text: str) -> str:
     # "next-to-top" (hyphenated: one word) is the second from the top; "next to the top one" is read later
     t = re.sub(r"\bnext-to-(top|bottom|left|right)\b", r"second \1", t)
     t = re.sub(r"\bnext-to-last\b", "penultimate", t)
+    # "centre-left": between the middle and the left, or the middle row's left? (refused below)
+    t = re.sub(r"\b(?:centre|center|middle|mid)-(?:left|right)\b", " centreside ", t)
     for pattern, repl in _CONTRACTIONS + _FIGURES:
         t = re.sub(pattern, repl, t)
     t = " ".join(re.sub(r"[^a-z]+", " ", t).split())
@@ -179,7 +181,10 @@ _RULES: tuple = (
     (r"\b(hinge|hinges|hinged)\b", lambda m: _refusal("a door's hinge side is not its position")),
     (r"\bof (the |these |those )?(two|three|four|five|six)\b", " of the "),
     # ---- one from an end
-    (r"\b" + _SIDE + r" but one\b", lambda m: f" {_side_code(m.group(1), 'second')} "),
+    (r"\bcentreside\b", lambda m: _refusal("'centre-left' / 'centre-right': the middle, or beside it?")),
+    (r"\b(?:a|an|any|some) (?:door|drawer|cupboard)\b",
+     lambda m: _refusal("'a door' / 'a drawer' names any one of several")),
+    (r"\b" + _SIDE + r"((?: drawer| door| cupboard| one)?) but one\b", lambda m: f" {_side_code(m.group(1), 'second')} {m.group(2)} "),
     (r"\bnext to (?:the )?(?:very )?" + _SIDE + "(" + _REF_NOUN + r")\b" + _NOT_POS,
      lambda m: f" NEXTTO {_side_code(m.group(1), 'second')} {m.group(2)} "),
     (r"\b(?:(?:one|just|directly|immediately|right|the one) )?(?:below|under|beneath|underneath) (?:the )?(?:very )?"
@@ -220,12 +225,12 @@ might may must do does did done please pls plz kindly you your yours yourself me
 go ahead and then now just quickly gently carefully slowly softly thanks thank cheers hey hi hello robot ok
 okay so well mind like want need needs wanted try to for of on in at from by up down out there here one ones
 located sitting sits sit placed positioned situated found find which who what where whose side sides end
-ends edge corner hand row rows column columns level levels tier tiers shelf shelves layer line stack cabinet
+ends edge hand row rows column columns level levels tier tiers shelf shelves layer line stack cabinet
 cabinets cupboard unit chest dresser sideboard wardrobe furniture piece front fronts face handle handles knob
 knobs pull pulls pulling open opens opened opening slide sliding swing get grab tug yank access reach see
 look position spot place part thing really quite as far very way with bit little time also too same again
 into how about help able if possible kind enough favour favor task job take give make have love appreciate
-drag lies lying sat inside
+drag lies lying sat inside u ur
 """.split())
 #: Words that change which part is meant in ways the parser does not follow, with the reason given.
 REFUSED_WORDS = {
@@ -270,7 +275,7 @@ def _read(text: str) -> _Reading:
         t = f" {' '.join(t.split())} "
     tokens = t.split()
     vertical, horizontal, kinds, reasons, unknown = [], [], [], [], []
-    middles, plural, singular, next_to, unsure_right = 0, False, False, False, False
+    middles, plural, singular, next_to, unsure_right, corner = 0, False, False, False, False, False
     drawer_named = any(w in ("drawer", "drawers") for w in tokens)
     for i, w in enumerate(tokens):
         before = tokens[max(0, i - 2):i]
@@ -284,6 +289,8 @@ def _read(text: str) -> _Reading:
             next_to = True
         elif w == "RIGHTQ":
             unsure_right = True
+        elif w in ("corner", "corners"):
+            corner = True
         elif w in ("door", "drawer") or (w == _CUPBOARD and not drawer_named):
             kinds.append("drawer" if w == "drawer" else "door")
             singular = True
@@ -298,14 +305,19 @@ def _read(text: str) -> _Reading:
             reasons.append(f"{w!r}: counted from which side? (say 'from the top', 'from the left', ...)")
         elif w not in FILLER and w not in (_CUPBOARD, _CUPBOARD + "s"):
             unknown.append(w)
+    if corner and not (vertical and horizontal):
+        reasons.append("which corner? (say 'top left', 'bottom right', ...)")
     if unsure_right and not horizontal:
         reasons.append("'right': the side, or 'just' (as in 'right at the top')?")
     return _Reading(tuple(vertical), tuple(horizontal), middles, tuple(kinds), plural and not singular, next_to,
                     tuple(dict.fromkeys(reasons)), tuple(dict.fromkeys(unknown)))
 
 
+_LABEL = {code: label for (_, label), code in _CODE.items()}
+
+
 def _label(codes: tuple[str, ...], labels: tuple[str, ...], axis: str) -> str:
-    return next(lab for lab in labels if _CODE[(axis, lab)] == codes[0])
+    return _LABEL[codes[0]]
 
 
 @lru_cache(maxsize=4096)
@@ -324,9 +336,9 @@ def parse_instruction(text: str) -> Description:
         ambiguous.append(f"more than one {next(iter(kinds), 'part')} is named: which one?")
     vertical, horizontal = set(r.vertical), set(r.horizontal)
     if len(vertical) > 1:
-        ambiguous.append("more than one height is named (" + ", ".join(sorted(vertical)).lower() + ")")
+        ambiguous.append("more than one height is named (" + ", ".join(sorted(_LABEL[c] for c in vertical)) + ")")
     if len(horizontal) > 1:
-        ambiguous.append("more than one side is named (" + ", ".join(sorted(horizontal)).lower() + ")")
+        ambiguous.append("more than one side is named (" + ", ".join(sorted(_LABEL[c] for c in horizontal)) + ")")
     if r.next_to and vertical and horizontal:
         ambiguous.append("'next to' in a grid: beside or below?")
     v = _label(r.vertical, VERTICAL, "v") if len(vertical) == 1 else ""
