@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "render-hand": "opend_mj.commands.hands:render_hand",
     "run": "opend_mj.commands.evaluate:run",
     "score": "opend_mj.commands.evaluate:score",
+    "reword": "opend_mj.commands.evaluate:reword",
     "evaluate-solver": "opend_mj.commands.evaluate:evaluate_solver",
     "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import random
+import re
 
 from opend_mj.language.algorithm1 import Description
 
@@ -128,11 +129,13 @@ def rewordings(description: Description, n: int | None = 50, seed: int = 0) -> l
     them, sorted, for ``n`` None). Labels that are empty are left out of every shape."""
     d = description
     shapes = [s for s in SHAPES if _clear(s, d)]
-    if not d.vertical:
-        shapes = [s.replace("{vb}", "").replace("{va}", "") for s in shapes]
-    if not d.horizontal:
-        shapes = [s.replace("{hb}", "").replace("{ha}", "") for s in shapes]
-    shapes = list(dict.fromkeys(_tidy(s) for s in shapes if "one of the {ns}" not in s or d.vertical or d.horizontal))
+    for label, names in ((d.vertical, ("vb", "va")), (d.horizontal, ("hb", "ha"))):
+        if not label:  # leave the label out, with the words that join it to the other one
+            for name in names:
+                shapes = [re.sub(r"(?:(?: and|,)? \{" + name + r"\}(?: and)?,?|\{" + name + r"\}(?: and|,)? ?)", " ", s)
+                          for s in shapes]
+    shapes = [_tidy(s) for s in shapes]
+    shapes = list(dict.fromkeys(s for s in shapes if not s.endswith(("that is", "which sits", "located", "of the {ns}"))))
     if n is None:
         out = {_tidy(f.format(np=_tidy(s.format(n=noun, ns=plural, **o))))
                for f in FRAMES for s in shapes for noun, plural in zip(NOUNS[d.kind], itertools.cycle(PLURALS[d.kind]))

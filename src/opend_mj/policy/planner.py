@@ -30,7 +30,7 @@ from typing import Callable
 
 import numpy as np
 
-from opend_mj.language import hinge_side, target_kind
+from opend_mj.language import InstructionNotUnderstood, hinge_side, target_kind
 from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     door_edges,
@@ -509,7 +509,13 @@ class Planner:
     def run(self, robot: Robot, obs: Observation) -> PlanResult:
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
-        result.target_kind = target_kind(obs.instruction)
+        try:
+            result.target_kind = target_kind(obs.instruction)
+        except InstructionNotUnderstood as exc:  # refused, never guessed: the robot does not move
+            result.stage_reached = result.failed_stage = "language"
+            result.events.append({"language": exc.reason})
+            self._hold_until_min_time(robot, None)
+            return result
         self._first = obs  # the image a pulled front's motion is measured against
         observed: tuple = ()
         handle, box = self.locate(robot, obs, result)
