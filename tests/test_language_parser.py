@@ -112,6 +112,9 @@ def test_rewordings_are_deterministic_and_vary():
     ("open the uppermost drawer front", "top drawer"),
     ("in the second-to-last row, the leftmost drawer", "second bottom left drawer"),
     ("open the drawer at the middle on the middle", "middle middle drawer"),
+    ("open the door on the right now", "right door"),
+    ("open the top drawer right now", "top drawer"),
+    ("the drawer on the left end", "left drawer"),
 ])
 def test_phrasings(text, expected):
     assert canonical_instruction(text) == expected
@@ -131,6 +134,10 @@ def test_phrasings(text, expected):
     ("open the drawer next to the top left one", "ambiguous", "relative"),
     ("open the corner drawer", "ambiguous", "which corner"),
     ("open a drawer", "ambiguous", "any one of several"),
+    ("open the drawer at the end", "ambiguous", "which end"),
+    ("open the top drawer on the side", "ambiguous", "which side"),
+    ("open the door in the row", "ambiguous", "which row"),
+    ("open the top drawer down there", "unknown", "there"),
 ])
 def test_refusals_name_what_is_missing_or_ambiguous(text, field, fragment):
     with pytest.raises(InstructionNotUnderstood) as info:

@@ -70,7 +70,8 @@ _FIGURES = ((r"\b1st\b", " first "), (r"\b2nd\b", " second "), (r"\b3rd\b", " th
 _PHRASES = (
     (r"\b(left|right) hand(ed)?\b", r"\1"), (r"\b(lefthand|righthand)\b", lambda m: m.group(1)[:-4]),
     (r"\b(top|bottom|left|right|upper|lower) ?most\b", r"\1"), (r"\ball the way\b", ""),
-    (r"\ball right\b|\balright\b", ""), (r"\bright (now|away)\b", ""), (r"\bat once\b", ""),
+    (r"^(?:all right|alright)\b", ""), (r"\balright\b", ""), (r"\bat once\b", ""),
+    (r"(?<!\bthe )(?<!\byour )(?<!\bmy )(?<!\bfar )(?<!\bto )(?<!\bfrom )\bright (now|away)\b", ""),
     (r"\bdrawer (front|face)s?\b", "drawer"), (r"\b(cupboard|cabinet|wardrobe) doors\b", "doors"),
     (r"\b(cupboard|cabinet|wardrobe) door\b", "door"), (r"\bnext to (the )?last\b", "penultimate"),
     (r"\bsecond (to )?last\b", "penultimate"), (r"\blast but one\b", "penultimate"),
@@ -223,7 +224,7 @@ FILLER = frozenset("""
 a an the this that these those it its is s are be been being am was were will would could can shall should
 might may must do does did done please pls plz kindly you your yours yourself me my mine i we us our let
 go ahead and then now just quickly gently carefully slowly softly thanks thank cheers hey hi hello robot ok
-okay so well mind like want need needs wanted try to for of on in at from by up down out there here one ones
+okay so well mind like want need needs wanted try to for of on in at from by up down out one ones
 located sitting sits sit placed positioned situated found find which who what where whose side sides end
 ends edge hand row rows column columns level levels tier tiers shelf shelves layer line stack cabinet
 cabinets cupboard unit chest dresser sideboard wardrobe furniture piece front fronts face handle handles knob
@@ -254,6 +255,13 @@ REFUSED_WORDS = {
         "number", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten", "zero", "numbered")},
 }
 _CODES = frozenset(_CODE.values())
+#: Words that point at a place only with a label of their axis: "the corner drawer", "the drawer at the
+#: end", "the drawer on this shelf" say no position; "the top left corner", "the left end", "the top shelf" do.
+_NEEDS_AXES = {**{w: ("v", "h") for w in ("corner", "corners")},
+               **{w: ("v",) for w in ("row", "rows", "level", "levels", "tier", "tiers", "shelf", "shelves", "layer")},
+               **{w: ("h",) for w in ("column", "columns", "side", "sides", "end", "ends", "edge", "edges")}}
+_NEEDS_HINT = {("v", "h"): "'top left', 'bottom right', ...", ("v",): "'top', 'middle', 'second from the bottom', ...",
+               ("h",): "'left', 'middle', 'second from the right', ..."}
 
 
 @dataclass(frozen=True)
@@ -275,7 +283,7 @@ def _read(text: str) -> _Reading:
         t = f" {' '.join(t.split())} "
     tokens = t.split()
     vertical, horizontal, kinds, reasons, unknown = [], [], [], [], []
-    middles, plural, singular, next_to, unsure_right, corner = 0, False, False, False, False, False
+    middles, plural, singular, next_to, unsure_right, needs = 0, False, False, False, False, set()
     drawer_named = any(w in ("drawer", "drawers") for w in tokens)
     for i, w in enumerate(tokens):
         before = tokens[max(0, i - 2):i]
@@ -289,8 +297,8 @@ def _read(text: str) -> _Reading:
             next_to = True
         elif w == "RIGHTQ":
             unsure_right = True
-        elif w in ("corner", "corners"):
-            corner = True
+        elif w in _NEEDS_AXES:
+            needs.add(w)
         elif w in ("door", "drawer") or (w == _CUPBOARD and not drawer_named):
             kinds.append("drawer" if w == "drawer" else "door")
             singular = True
@@ -305,8 +313,13 @@ def _read(text: str) -> _Reading:
             reasons.append(f"{w!r}: counted from which side? (say 'from the top', 'from the left', ...)")
         elif w not in FILLER and w not in (_CUPBOARD, _CUPBOARD + "s"):
             unknown.append(w)
-    if corner and not (vertical and horizontal):
-        reasons.append("which corner? (say 'top left', 'bottom right', ...)")
+    for word in sorted(needs):
+        axes = _NEEDS_AXES[word]
+        said = {"v": bool(vertical), "h": bool(horizontal)}
+        if middles:  # a bare middle stands for the missing axis
+            said = {"v": True, "h": True} if (vertical or horizontal) else {"v": True, "h": middles > 1}
+        if not all(said[a] for a in axes):
+            reasons.append(f"which {word}? (name it: {_NEEDS_HINT[axes]})")
     if unsure_right and not horizontal:
         reasons.append("'right': the side, or 'just' (as in 'right at the top')?")
     return _Reading(tuple(vertical), tuple(horizontal), middles, tuple(kinds), plural and not singular, next_to,
