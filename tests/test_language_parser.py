@@ -115,6 +115,11 @@ def test_rewordings_are_deterministic_and_vary():
     ("open the door on the right now", "right door"),
     ("open the top drawer right now", "top drawer"),
     ("the drawer on the left end", "left drawer"),
+    ("Right, open the left door.", "left door"),
+    ("Right, top drawer please", "top drawer"),
+    ("right top drawer", "top right drawer"),
+    ("the drawer nearest the floor", "bottom drawer"),
+    ("the door closest to the ceiling on the left", "top left door"),
 ])
 def test_phrasings(text, expected):
     assert canonical_instruction(text) == expected
@@ -129,7 +134,7 @@ def test_phrasings(text, expected):
     ("open the top drawers", "ambiguous", "more than one drawer"),
     ("close the top drawer", "ambiguous", "closing"),
     ("open the drawer above the left door", "ambiguous", "relative to another part"),
-    ("open the drawer nearest the floor", "unknown", "floor"),
+    ("open the drawer nearest the window", "unknown", "window"),
     ("open the middle drawer in the middle", "ambiguous", "'middle' of what"),
     ("open the drawer next to the top left one", "ambiguous", "relative"),
     ("open the corner drawer", "ambiguous", "which corner"),

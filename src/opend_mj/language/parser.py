@@ -75,7 +75,8 @@ _PHRASES = (
     (r"\bdrawer (front|face)s?\b", "drawer"), (r"\b(cupboard|cabinet|wardrobe) doors\b", "doors"),
     (r"\b(cupboard|cabinet|wardrobe) door\b", "door"), (r"\bnext to (the )?last\b", "penultimate"),
     (r"\bsecond (to )?last\b", "penultimate"), (r"\blast but one\b", "penultimate"),
-    (r"\bchest of drawers\b", "cabinet"), (r"\bat the middle on the middle\b", "middle middle"),
+    (r"\b(?:nearest|closest|next) (?:to )?the (?:floor|ground)\b", "bottom"),
+    (r"\b(?:nearest|closest) (?:to )?the ceiling\b", "top"), (r"\bchest of drawers\b", "cabinet"), (r"\bat the middle on the middle\b", "middle middle"),
 )
 _SYNONYMS = {
     "centre": "middle", "center": "middle", "central": "middle", "centremost": "middle", "centermost": "middle",
@@ -98,6 +99,8 @@ def normalise(text: str) -> str:
     # "next-to-top" (hyphenated: one word) is the second from the top; "next to the top one" is read later
     t = re.sub(r"\bnext-to-(top|bottom|left|right)\b", r"second \1", t)
     t = re.sub(r"\bnext-to-last\b", "penultimate", t)
+    # a sentence-initial "Right," / "OK," (a discourse marker, set off by punctuation) names no side
+    t = re.sub(r"^\s*(?:right|ok|okay|alright|all right|so|now|well)(?: then)?\s*[,.!:;]+", " ", t)
     # "centre-left": between the middle and the left, or the middle row's left? (refused below)
     t = re.sub(r"\b(?:centre|center|middle|mid)-(?:left|right)\b", " centreside ", t)
     for pattern, repl in _CONTRACTIONS + _FIGURES:
