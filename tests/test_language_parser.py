@@ -21,14 +21,17 @@ from opend_mj.language import (
     target_kind,
 )
 
+#: Phrasings written by hand: a first batch (the instruction file of the end-to-end runs) and a second
+#: one written after the parser had been fixed for the first batch's failures.
 CORPUS = Path(__file__).parent / "data" / "instruction_corpus.csv"
+CORPUS_SECOND = Path(__file__).parent / "data" / "instruction_corpus_second.csv"
 VERTICAL = ("", "top", "second top", "middle", "second bottom", "bottom")
 HORIZONTAL = ("", "left", "second left", "middle", "second right", "right")
 ALL = [Description(v, h, k) for v in VERTICAL for h in HORIZONTAL for k in ("door", "drawer")]
 
 
 def read_corpus() -> list[dict]:
-    return list(csv.DictReader(CORPUS.open(newline="")))
+    return [row for path in (CORPUS, CORPUS_SECOND) for row in csv.DictReader(path.open(newline=""))]
 
 
 def grade(rows: list[dict]) -> dict:
@@ -116,6 +119,8 @@ def test_rewordings_are_deterministic_and_vary():
     ("open the top drawer right now", "top drawer"),
     ("the drawer on the left end", "left drawer"),
     ("Right, open the left door.", "left door"),
+    ("Is it possible to open the drawer on the left?", "left drawer"),
+    ("which door? the one on the far right. open it", "right door"),
     ("Right, top drawer please", "top drawer"),
     ("right top drawer", "top right drawer"),
     ("the drawer nearest the floor", "bottom drawer"),
@@ -140,6 +145,8 @@ def test_phrasings(text, expected):
     ("open the corner drawer", "ambiguous", "which corner"),
     ("open a drawer", "ambiguous", "any one of several"),
     ("open the drawer at the end", "ambiguous", "which end"),
+    ("is the bottom drawer open?", "ambiguous", "a question about a part"),
+    ("which drawer is at the top?", "ambiguous", "a question about a part"),
     ("open the top drawer on the side", "ambiguous", "which side"),
     ("open the door in the row", "ambiguous", "which row"),
     ("open the top drawer down there", "unknown", "there"),

@@ -234,7 +234,7 @@ cabinets cupboard unit chest dresser sideboard wardrobe furniture piece front fr
 knobs pull pulls pulling open opens opened opening slide sliding swing get grab tug yank access reach see
 look position spot place part thing really quite as far very way with bit little time also too same again
 into how about help able if possible kind enough favour favor task job take give make have love appreciate
-drag lies lying sat inside u ur
+drag lies lying sat inside u ur hmm um uh er erm yo
 """.split())
 #: Words that change which part is meant in ways the parser does not follow, with the reason given.
 REFUSED_WORDS = {
@@ -277,6 +277,20 @@ class _Reading:
     next_to: bool
     reasons: tuple[str, ...]
     unknown: tuple[str, ...]
+
+
+#: A question about a part ("is the bottom drawer open?", "which drawer is at the top?") is not a
+#: request to open it: yes/no questions about "the ..." / "there", and which/what/where questions
+#: without a verb of opening.
+_QUESTION = re.compile(r"^\s*(?:(?:is|are|was|were) (?:the|that|this|these|those|there)\b|(?:which|what|where)\b)")
+_OPENING = re.compile(r"\b(?:open|pull|slide|swing|get|grab|yank|tug|access)\b")
+
+
+def _question(text: str) -> bool:
+    t = text.lower()
+    if "?" not in t or not _QUESTION.match(t):
+        return False
+    return t.split()[0] in ("is", "are", "was", "were") or not _OPENING.search(t)
 
 
 def _read(text: str) -> _Reading:
@@ -340,6 +354,8 @@ def _label(codes: tuple[str, ...], labels: tuple[str, ...], axis: str) -> str:
 def parse_instruction(text: str) -> Description:
     """The labels an instruction names (Algorithm 1's vocabulary); raises
     :class:`InstructionNotUnderstood` where it cannot name exactly one canonical target."""
+    if _question(str(text)):
+        raise InstructionNotUnderstood(text, (), ("a question about a part, not a request to open it",))
     r = _read(str(text))
     missing: list[str] = []
     ambiguous = list(r.reasons)
