@@ -78,3 +78,22 @@ def test_fasterrcnn_matches_rewordings_as_their_template(monkeypatch):
         (78.0, 50.0), (178.0, 150.0), (178.0, 50.0), (78.0, 150.0)]
     with pytest.raises(InstructionNotUnderstood):
         solver.solve(rgb, depth, "open the door next to the top left one", None)
+
+
+def test_training_instructions_can_be_grammar_rewordings():
+    """`opend train --solver cliport --reword P`: with chance P a training target's instruction is a
+    grammar rewording that reads back to its template; its embedding stays out of the saved table."""
+    import random
+
+    from opend_mj.language import canonical_instruction
+    from opend_mj.policy.learned.text import CachedEncoder
+    from opend_mj.policy.learned.train import _encode_for_training, training_instruction
+
+    rng = random.Random(0)
+    assert {training_instruction("top left drawer", rng, 0.0) for _ in range(20)} == {"top left drawer"}
+    worded = [training_instruction("top left drawer", rng, 1.0) for _ in range(30)]
+    assert len(set(worded)) > 10 and {canonical_instruction(t) for t in worded} == {"top left drawer"}
+    text = CachedEncoder("bow")
+    text.encode(["top left drawer"])
+    vectors = _encode_for_training(text, ["top left drawer"] + worded[:3])
+    assert vectors.shape == (4, text.dim) and set(text.table) == {"top left drawer"}
