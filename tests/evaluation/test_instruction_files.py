@@ -128,3 +128,28 @@ def test_opend_run_with_an_instruction_file(small_dataset, tmp_path):
     assert len(records) == 2 and all(r["phrasing"] and r["understood_as"] for r in records)
     bad = CliRunner().invoke(main, args + ["--paraphrase", "2"])
     assert bad.exit_code == 2 and "exclude each other" in bad.output
+
+
+def test_opend_reword_writes_one_grammar_rewording_per_target(small_dataset, tmp_path):
+    """`opend reword`: an instruction file (JSON targets) whose phrasings all read back to their
+    target's template; another seed words them otherwise."""
+    from click.testing import CliRunner
+
+    from opend_mj.assets.layout import load_manifest
+    from opend_mj.cli import main
+    from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.language import canonical_instruction
+
+    out = tmp_path / "reworded.json"
+    result = CliRunner().invoke(main, ["reword", "--cabinets", str(small_dataset), "--split", "all", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    spec = load_instruction_file(out)
+    templates = {(c["id"], t["joint"]): t["instruction"] for c, t in load_manifest(small_dataset).targets("all")}
+    assert set(spec.targets) == set(templates)
+    assert all(canonical_instruction(text) == templates[key] for key, text in spec.targets.items())
+    jobs = assign_phrasings(make_jobs(small_dataset, ["franka"], "oracle", split="all"), spec)
+    assert reading_summary(jobs)["as_template"] == len(templates)
+    other = tmp_path / "other.json"
+    CliRunner().invoke(main, ["reword", "--cabinets", str(small_dataset), "--split", "all", "--seed", "1",
+                              "--out", str(other)])
+    assert load_instruction_file(other).targets != spec.targets
