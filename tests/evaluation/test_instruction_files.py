@@ -97,7 +97,8 @@ def test_refused_and_reworded_episodes(drawer_cabinet):
                       split="train", hand="franka", solver="oracle", use_grasp_file=False,
                       target_type="drawer", instruction=target["instruction"])
     plain = run_episode(base)
-    worded = run_episode(EpisodeJob(**{**base.__dict__, "phrasing": "could you pull out the uppermost drawer, please?"}))
+    words = "could you pull out the uppermost drawer, please?"
+    worded = run_episode(EpisodeJob(**{**base.__dict__, "phrasing": words}))
     refused = run_episode(EpisodeJob(**{**base.__dict__, "phrasing": "open the second drawer"}))
     assert plain["success"] and plain["understood_as"] == "top drawer"
     differ = {k for k in strip_wall_clock(plain) if strip_wall_clock(plain)[k] != worded.get(k)}

@@ -135,7 +135,8 @@ def rewordings(description: Description, n: int | None = 50, seed: int = 0) -> l
                 shapes = [re.sub(r"(?:(?: and|,)? \{" + name + r"\}(?: and)?,?|\{" + name + r"\}(?: and|,)? ?)", " ", s)
                           for s in shapes]
     shapes = [_tidy(s) for s in shapes]
-    shapes = list(dict.fromkeys(s for s in shapes if not s.endswith(("that is", "which sits", "located", "of the {ns}"))))
+    dangling = ("that is", "which sits", "located", "of the {ns}")  # a shape left with no label to say
+    shapes = list(dict.fromkeys(s for s in shapes if not s.endswith(dangling)))
     if n is None:
         out = {_tidy(f.format(np=_tidy(s.format(n=noun, ns=plural, **o))))
                for f in FRAMES for s in shapes for noun, plural in zip(NOUNS[d.kind], itertools.cycle(PLURALS[d.kind]))

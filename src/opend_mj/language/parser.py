@@ -76,7 +76,8 @@ _PHRASES = (
     (r"\b(cupboard|cabinet|wardrobe) door\b", "door"), (r"\bnext to (the )?last\b", "penultimate"),
     (r"\bsecond (to )?last\b", "penultimate"), (r"\blast but one\b", "penultimate"),
     (r"\b(?:nearest|closest|next) (?:to )?the (?:floor|ground)\b", "bottom"),
-    (r"\b(?:nearest|closest) (?:to )?the ceiling\b", "top"), (r"\bchest of drawers\b", "cabinet"), (r"\bat the middle on the middle\b", "middle middle"),
+    (r"\b(?:nearest|closest) (?:to )?the ceiling\b", "top"), (r"\bchest of drawers\b", "cabinet"),
+    (r"\bat the middle on the middle\b", "middle middle"),
 )
 _SYNONYMS = {
     "centre": "middle", "center": "middle", "central": "middle", "centremost": "middle", "centermost": "middle",
@@ -112,7 +113,6 @@ def normalise(text: str) -> str:
 
 
 # ------------------------------------------------------------------ phrase rules
-SIDES = ("top", "bottom", "left", "right")
 _CODE = {("v", lab): "V" + lab.upper().replace(" ", "") for lab in VERTICAL}
 _CODE.update({("h", lab): "H" + lab.upper().replace(" ", "") for lab in HORIZONTAL})
 _AXIS = {"top": "v", "bottom": "v", "left": "h", "right": "h"}
@@ -160,8 +160,9 @@ def _ordinal_row(m: re.Match) -> str:
 
 #: Words after which "right" is the side, and after which it is an intensifier.
 _SIDE_BEFORE = frozenset("the your my far to on from of top bottom middle hand very extreme".split())
-_INTENSIFIER_BEFORE = frozenset("drawer drawers door doors cupboard cupboards cabinet unit fronts front one ones is s sits sitting located placed positioned situated "
-                                "that it which just found lies lying".split())
+_INTENSIFIER_BEFORE = frozenset("drawer drawers door doors cupboard cupboards cabinet unit fronts front one ones is s "
+                                "sits sitting located placed positioned situated that it which just found lies "
+                                "lying".split())
 
 
 def _right_before_position(m: re.Match) -> str:
@@ -183,12 +184,13 @@ _RULES: tuple = (
     (r"\b(its|cabinet s|door s|drawer s|unit s|their)( own)? (left|right)\b",
      lambda m: _refusal("left and right are the viewer's; the part's own side is ambiguous")),
     (r"\b(hinge|hinges|hinged)\b", lambda m: _refusal("a door's hinge side is not its position")),
-    (r"\bof (the |these |those )?(two|three|four|five|six)\b", " of the "),
-    # ---- one from an end
     (r"\bcentreside\b", lambda m: _refusal("'centre-left' / 'centre-right': the middle, or beside it?")),
     (r"\b(?:a|an|any|some) (?:door|drawer|cupboard)\b",
      lambda m: _refusal("'a door' / 'a drawer' names any one of several")),
-    (r"\b" + _SIDE + r"((?: drawer| door| cupboard| one)?) but one\b", lambda m: f" {_side_code(m.group(1), 'second')} {m.group(2)} "),
+    (r"\bof (the |these |those )?(two|three|four|five|six)\b", " of the "),  # "the left one of the two doors"
+    # ---- one from an end
+    (r"\b" + _SIDE + r"((?: drawer| door| cupboard| one)?) but one\b",
+     lambda m: f" {_side_code(m.group(1), 'second')} {m.group(2)} "),
     (r"\bnext to (?:the )?(?:very )?" + _SIDE + "(" + _REF_NOUN + r")\b" + _NOT_POS,
      lambda m: f" NEXTTO {_side_code(m.group(1), 'second')} {m.group(2)} "),
     (r"\b(?:(?:one|just|directly|immediately|right|the one) )?(?:below|under|beneath|underneath) (?:the )?(?:very )?"
@@ -228,8 +230,7 @@ a an the this that these those it its is s are be been being am was were will wo
 might may must do does did done please pls plz kindly you your yours yourself me my mine i we us our let
 go ahead and then now just quickly gently carefully slowly softly thanks thank cheers hey hi hello robot ok
 okay so well mind like want need needs wanted try to for of on in at from by up down out one ones
-located sitting sits sit placed positioned situated found find which who what where whose side sides end
-ends edge hand row rows column columns level levels tier tiers shelf shelves layer line stack cabinet
+located sitting sits sit placed positioned situated found find which who what where whose hand line stack cabinet
 cabinets cupboard unit chest dresser sideboard wardrobe furniture piece front fronts face handle handles knob
 knobs pull pulls pulling open opens opened opening slide sliding swing get grab tug yank access reach see
 look position spot place part thing really quite as far very way with bit little time also too same again
