@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "run": "opend_mj.commands.evaluate:run",
     "score": "opend_mj.commands.evaluate:score",
     "report": "opend_mj.commands.evaluate:report",
+    "reword": "opend_mj.commands.evaluate:reword",
     "evaluate-solver": "opend_mj.commands.evaluate:evaluate_solver",
     "search-grasp": "opend_mj.commands.evaluate:search_grasp",
     "render": "opend_mj.commands.render:render",

@@ -24,11 +24,28 @@ def test_score_tables_exact():
     assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 100.0 (2/2) | 0.0 (0/2) | 50.0 (2/4) |" in md
     assert "| allegro | oracle | 0.0 (0/1) | 0.0 (0/1) | 0.0 (0/2) | 50.0 (1/2) | 0.0 (0/2) | 25.0 (1/4) |" in md
     # failure stages and wrong targets
-    assert "| allegro | oracle | train | 1 | 0 | 0 | 1 | 0 | 0 |" in md
-    assert "| franka | oracle | test | 2 | 0 | 1 | 0 | 0 | 0 | 1 |" in md
+    assert "| allegro | oracle | train | 1 | 0 | 0 | 0 | 1 | 0 | 0 |" in md
+    assert "| franka | oracle | test | 2 | 0 | 0 | 1 | 0 | 0 | 0 | 1 |" in md
     assert "| allegro | oracle | test | 4 | 1 | 0 |" in md
     assert "| franka | oracle | test | 3 | 1 | 1 |" in md
     assert "| allegro | oracle | 6 | 8.50 | 2.25 |" in md
+
+
+def test_refused_instructions_are_a_stage_of_their_own():
+    """Episodes whose instruction the parser refused count under "language" (first stage column),
+    and their kind comes from the manifest's target type, not from the refused words."""
+    from opend_mj.evaluation.scoring import STAGE_ORDER, report_markdown
+
+    base = {"cabinet": "c", "hand": "allegro", "solver": "oracle", "split": "test", "seed": 0, "light_scale": 1.0,
+            "pull": "arc", "target_type": "drawer", "open_ratio": 0.0, "success": False}
+    records = [{**base, "joint": "a", "instruction": "open the third drawer from the top", "failed_stage": "language"},
+               {**base, "joint": "b", "instruction": "open the one on the left", "target_type": "door",
+                "failed_stage": "language"},
+               {**base, "joint": "c", "instruction": "top drawer", "failed_stage": "grasp"}]
+    md = report_markdown(records)
+    assert STAGE_ORDER[0] == "language"
+    assert "| allegro | oracle | test | 3 | 2 | 0 | 0 | 1 | 0 | 0 | 0 |" in md
+    assert "| allegro | oracle | - | - | - | 0.0 (0/2) | 0.0 (0/1) | 0.0 (0/3) |" in md
 
 
 def test_score_command_csv_and_plot(tmp_path):

@@ -74,6 +74,9 @@ def _check_cabinets(ctx, param, value):
 @click.option("--pull", type=click.Choice(["straight", "arc"]), default="arc", show_default=True)
 @click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True,
               help="0: the Algorithm 1 instruction; 1-3: reworded ('open the drawer at the top on the left').")
+@click.option("--instruction-file", "instruction_file", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None, help="Your own phrasings (JSON or CSV: per target, or per Algorithm 1 template, handed "
+                                 "out in turn; see docs/language.md). Excludes --paraphrase.")
 @click.option("--physics-timestep", "physics_timestep", default=None, callback=_check_timestep,
               help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
                    "see BENCHMARKS.md for success and penetration at each.")
@@ -87,7 +90,7 @@ def _check_cabinets(ctx, param, value):
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.pass_context
 def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seeds, video_dir, light_scale,
-        pull, paraphrase, physics_timestep, policy, policy_args, wait):
+        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -129,6 +132,8 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
                                  physics_timestep=physics_timestep)]
     if policy_spec is not None:
         jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
+    if instruction_file is not None:
+        jobs = _with_phrasings(jobs, instruction_file, paraphrase)
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
@@ -144,6 +149,45 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     if counts["ran"] and counts["errors"] == counts["ran"]:
         click.echo("error: every episode failed to run (see error_reason in the results file)", err=True)
         raise SystemExit(1)
+
+
+def _with_phrasings(jobs, instruction_file: Path, paraphrase: int):
+    """``jobs`` with the file's phrasings; says how the parser reads them (per target)."""
+    from opend_mj.evaluation.phrasings import (
+        InstructionFileError,
+        assign_phrasings,
+        load_instruction_file,
+        reading_summary,
+    )
+
+    if paraphrase:
+        raise click.UsageError("--instruction-file and --paraphrase exclude each other")
+    try:
+        jobs = assign_phrasings(jobs, load_instruction_file(instruction_file))
+    except InstructionFileError as exc:
+        raise click.BadParameter(str(exc), param_hint="--instruction-file") from None
+    seen = reading_summary(jobs)
+    click.echo(f"{instruction_file}: {seen['targets']} targets reworded; the parser reads {seen['as_template']} "
+               f"as their template, refuses {seen['refused']}, misreads {seen['misread']}", err=True)
+    return jobs
+
+
+@click.command("reword")
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Which rewording each target gets.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The instruction file to write (.json), for `opend run --instruction-file`.")
+def reword(cabinets_dir, split, seed, out):
+    """Write an instruction file with one rewording per target, drawn from the grammar."""
+    import json
+
+    from opend_mj.evaluation.phrasings import generated_instruction_file
+
+    data = generated_instruction_file(cabinets_dir, split, seed)
+    out.write_text(json.dumps(data, indent=1) + "\n")
+    click.echo(f"{out}: {sum(len(v) for v in data['targets'].values())} targets")
 
 
 @click.command("score")

@@ -65,6 +65,8 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--fusion", type=click.Choice(["film", "product"]), default="film", show_default=True)
 @click.option("--image-size", type=int, default=128, show_default=True, help="cliport input resolution.")
 @click.option("--text-encoder", default="minilm", show_default=True, help="cliport text encoder (minilm, bow).")
+@click.option("--reword", type=click.FloatRange(0, 1), default=0.0, show_default=True,
+              help="cliport: chance that a training instruction is a grammar rewording of its template.")
 @click.option("--evaluate", "evaluate_subset", type=click.Choice(["train", "val", "test"]), default=None,
               help="Do not train: evaluate the checkpoint (--out) on this subset of --data and print the metrics.")
 @click.option("--threshold", type=float, default=None, help="fasterrcnn detection threshold for --evaluate.")
@@ -83,7 +85,7 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
                    "checkpoint seeds both kinds).")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
-          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, evaluate_subset, threshold,
+          box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, reword, evaluate_subset, threshold,
           pretrained, kinds, depth, context, init, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
@@ -107,7 +109,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         from opend_mj.policy.learned.affordance import AffordanceConfig
 
         cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
-                               text_encoder=text_encoder)
+                               text_encoder=text_encoder, reword=reword)
         meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
                                init=init, log=click.echo, **common)
     else:

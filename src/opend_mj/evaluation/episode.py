@@ -52,6 +52,8 @@ EPISODE_FIELDS: tuple[EpisodeField, ...] = (
     EpisodeField("light_scale", 1.0, _rounded(6), in_scene=True, tag=lambda v: f"l{v:g}"),
     EpisodeField("pull", "arc"),
     EpisodeField("paraphrase", 0, int, always=False, tag=lambda v: f"p{v}"),
+    #: The user's own wording of the instruction (`opend run --instruction-file`); None: the template's.
+    EpisodeField("phrasing", None, always=False, tag=lambda v: f"i{zlib.crc32(str(v).encode()):08x}"),
     EpisodeField("physics_timestep", None, _rounded(9), in_scene=True, always=False, tag=lambda v: f"dt{v:.6g}"),
     EpisodeField("policy", None, in_key=False, always=False, tag=None),
 )
@@ -81,6 +83,9 @@ class EpisodeJob:
     instruction: str | None = None
     #: 0: the Algorithm 1 instruction; k > 0: the k-th paraphrase template (language.PARAPHRASES)
     paraphrase: int = 0
+    #: The instruction in the user's words (`opend run --instruction-file`); None: Algorithm 1's
+    #: (or the ``paraphrase`` template's). Read by the same parser as every instruction.
+    phrasing: str | None = None
     #: Physics timestep in seconds; None: TaskConfig's default.
     physics_timestep: float | None = None
     #: An agent acts instead of the planner (`opend run --policy`): its spec and constructor

@@ -128,7 +128,9 @@ class _StopAtLast:
 
 
 def instruction_for(job: EpisodeJob) -> str | None:
-    """The job's paraphrased instruction, or None for the target's own (Algorithm 1)."""
+    """The job's own phrasing, its paraphrased instruction, or None for the target's own (Algorithm 1)."""
+    if job.phrasing is not None:
+        return job.phrasing
     if not job.paraphrase:
         return None
     from opend_mj.language import Description, paraphrase
@@ -241,7 +243,10 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     # failure stage (ground truth, for the tables)
     failed = failure_stage(outcome.success, outcome.range_ratio, probes.get("site_to_handle", 1.0),
                            box=plan.box["box"] if plan.box else None, gt_box=gt_box)
+    if plan.failed_stage == "language" and not outcome.success:
+        failed = "language"  # the instruction was refused: the robot did not act
     return {
+        **language_fields(instruction),
         "cabinet_dir": job.cabinet_dir,
         "target_type": target.kind,
         "instruction": instruction,
@@ -276,6 +281,17 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         "physics_warnings": list(warnings),
         "video": str(video.path) if video else None,
     }
+
+
+def language_fields(instruction: str) -> dict:
+    """How the parser read the instruction: ``understood_as`` (the canonical template, None when
+    refused) and, when refused, ``language_refusal`` (what is missing or ambiguous)."""
+    from opend_mj.language import InstructionNotUnderstood, canonical_instruction
+
+    try:
+        return {"understood_as": canonical_instruction(instruction)}
+    except InstructionNotUnderstood as exc:
+        return {"understood_as": None, "language_refusal": exc.reason}
 
 
 def _diverged_record(job, task, physics, instruction, gt_box, warnings, reason) -> dict:

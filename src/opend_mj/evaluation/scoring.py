@@ -19,7 +19,7 @@ THRESHOLDS = (0.2, 0.5, 0.9)
 RANGE_THRESHOLD = 0.75
 SPLITS = ("train", "test")
 KINDS = ("drawer", "door", "overall")
-STAGE_ORDER = ("locate", "approach", "grasp", "pull", "physics", "error")
+STAGE_ORDER = ("language", "locate", "approach", "grasp", "pull", "physics", "error")
 
 
 def load_records(paths: Iterable[Path]) -> list[dict]:
@@ -67,9 +67,12 @@ def _kind(r: dict) -> str | None:
     instruction = str(r.get("instruction", "")).strip()
     if not instruction:
         return None
-    from opend_mj.language import target_kind
+    from opend_mj.language import InstructionNotUnderstood, target_kind
 
-    return target_kind(instruction)
+    try:
+        return target_kind(instruction)
+    except InstructionNotUnderstood:
+        return None
 
 
 def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:

@@ -50,6 +50,10 @@ class AffordanceConfig:
     text_dim: int = 384
     image_size: int = 256  # input resolution (renders are resized to it)
     decoder_width: int = 1  # multiplier of the decoder widths (1: 128, 64, 32)
+    #: Training only: the chance that a training target's instruction is replaced by a grammar
+    #: rewording of it (`opend_mj.language.rewordings`), for a model that reads words as people say
+    #: them (a solver with ``canonical=False``); 0: Algorithm 1's templates only.
+    reword: float = 0.0
 
 
 def _torch():

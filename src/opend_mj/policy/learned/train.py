@@ -43,6 +43,16 @@ def mirror_instruction(text: str) -> str:
     return " ".join(swap.get(w, w) for w in words)
 
 
+def training_instruction(template: str, rng: random.Random, reword: float, choices: int = 50) -> str:
+    """``template``, or with chance ``reword`` one of ``choices`` grammar rewordings of it (drawn with
+    ``rng``), so a text encoder is trained on the words people use, each of them naming the same target."""
+    if reword <= 0 or rng.random() >= reword:
+        return template
+    from opend_mj.language import parse_instruction, rewordings
+
+    return rng.choice(rewordings(parse_instruction(template), choices, seed=rng.randrange(1 << 16)))
+
+
 def _half_state(model) -> dict:
     return {k: (v.half() if v.is_floating_point() else v).cpu() for k, v in model.state_dict().items()}
 
@@ -232,6 +242,8 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
         if augment and rng.random() < 0.5:
             rgb, depth, y = rgb[:, ::-1], depth[:, ::-1], y[:, ::-1]
             instruction = mirror_instruction(instruction)
+        if augment:
+            instruction = training_instruction(instruction, rng, config.reword)
         x = prepare_image(rgb.copy(), depth.copy(), config.image_size)
         yt = torch.from_numpy(np.ascontiguousarray(y))[None, None]
         if yt.shape[-1] != config.image_size:
@@ -239,8 +251,21 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
         xs.append(x)
         ys.append(yt[0])
         instr.append(instruction)
-    ts = torch.from_numpy(text.encode(instr))
+    ts = torch.from_numpy(_encode_for_training(text, instr))
     return torch.stack(xs), ts, torch.stack(ys)
+
+
+#: (encoder name, rewording) -> embedding: kept out of the table saved with the model (templates only).
+_REWORDED: dict[tuple[str, str], np.ndarray] = {}
+
+
+def _encode_for_training(text, instr: list[str]) -> np.ndarray:
+    """``text.encode``, except that texts outside its table (grammar rewordings) are encoded apart.
+    Without rewording every training text is in the table already (it is filled before training)."""
+    new = sorted({t for t in instr if t not in text.table and (text.name, t) not in _REWORDED})
+    for t, e in zip(new, text.encoder.encode(new) if new else []):
+        _REWORDED[(text.name, t)] = np.asarray(e, np.float32)
+    return np.stack([text.table[t] if t in text.table else _REWORDED[(text.name, t)] for t in instr]).astype(np.float32)
 
 
 def _pairs(records, all_targets: bool, rng: random.Random | None = None):

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from opend_mj.language import target_kind
+from opend_mj.language import InstructionNotUnderstood, target_kind
 from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     estimate_handle,
@@ -92,8 +92,14 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
         """One episode from its one observation: open the handle the instruction names."""
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
-        result.target_kind = target_kind(obs.instruction)
         self.state = EpisodeState(first=obs)  # the image a pulled front's motion is measured against
+        try:
+            result.target_kind = target_kind(obs.instruction)
+        except InstructionNotUnderstood as exc:  # refused, never guessed: the robot does not move
+            result.stage_reached = result.failed_stage = "language"
+            result.events.append({"language": exc.reason})
+            self._hold_until_min_time(robot, None)
+            return result
         observed: tuple = ()
         handle, box = self.locate(robot, obs, result)
         if handle is None:
