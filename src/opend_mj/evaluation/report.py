@@ -120,8 +120,8 @@ CONDITIONS = (
     ("oracle_test_light07.jsonl", "oracle, light x 0.7"),
     ("cliport_test_light07.jsonl", "CLIPort, light x 0.7"),
     ("fasterrcnn_test_light07.jsonl", "Faster R-CNN, light x 0.7"),
-    ("cliport_test_paraphrase2.jsonl", "CLIPort, reworded instructions"),
-    ("fasterrcnn_test_paraphrase2.jsonl", "Faster R-CNN, reworded instructions"),
+    ("cliport_test_corpus.jsonl", "CLIPort, hand-written rewordings"),
+    ("fasterrcnn_test_corpus.jsonl", "Faster R-CNN, hand-written rewordings"),
 )
 
 
