@@ -18,7 +18,7 @@ JSON::
 CSV (a header row; other columns, such as a note, are ignored)::
 
     cabinet,joint,instruction            or        instruction,template
-    45780,joint_1,open the lowest drawer           the upper-left drawer,top left drawer
+    proc_0011,joint_1,open the lowest drawer       the upper-left drawer,top left drawer
 
 A CSV row with an empty template and no cabinet names no target (a phrasing that must be refused,
 as in the parser's test corpus) and is skipped, so that corpus is itself an instruction file.
