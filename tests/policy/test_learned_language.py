@@ -69,7 +69,9 @@ def test_fasterrcnn_matches_rewordings_as_their_template(monkeypatch):
     solver = detector.FasterRCNNSolver(checkpoint=CHECKPOINTS / "fasterrcnn.pt", proposals=False)
     boxes = np.array(GRID, float)
     found = detector.Detections(boxes, np.full(4, 0.95), np.tile([0.1, 0.9], (4, 1)))
-    monkeypatch.setattr(detector, "detect_handles", lambda *a, **k: (found, found))
+    import opend_mj.policy.learned.detector.solver as detector_solver  # where the solver looks it up
+
+    monkeypatch.setattr(detector_solver, "detect_handles", lambda *a, **k: (found, found))
     rgb, depth = np.zeros((256, 256, 3), np.uint8), np.ones((256, 256), np.float32)
     for template, words in REWORDED:
         got = solver.solve(rgb, depth, words, None).as_tuple()

@@ -107,16 +107,18 @@ def perceive_handle(solver, rgb, depth, instruction: str, view, planner_config=N
     box = solver.solve(rgb, depth, instruction, view)
     if box is None:
         return None
-    if config.refine_with_depth and snaps_to_depth(solver, box):
-        box = refine_box_with_depth(box, depth, view)
-    if config.one_of_paired_handles:
-        single = one_of_paired_handles(box, depth)
+    seen = config.perception  # the planner's own depth perception, with the planner's settings
+    if config.locate.refine_with_depth and snaps_to_depth(solver, box):
+        box = refine_box_with_depth(box, depth, view, seen)
+    if config.locate.one_of_paired_handles:
+        single = one_of_paired_handles(box, depth, seen)
         box = single if single is not None else box
-    handle = estimate_handle(box, depth, view, config)
+    handle = estimate_handle(box, depth, view, seen)
     if handle is None:
         return None
-    shape = measure_handle(handle, box, depth, view)
-    hinge = infer_hinge_side(handle, depth, view) if describe_instruction(instruction).kind == "door" else None
+    shape = measure_handle(handle, box, depth, view, seen)
+    door = describe_instruction(instruction).kind == "door"
+    hinge = infer_hinge_side(handle, depth, view, seen) if door else None
     return HandlePercept(box=box, handle=handle, shape=shape, hinge=hinge)
 
 
