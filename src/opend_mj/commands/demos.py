@@ -46,6 +46,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
                           progress=progress)
     click.echo(f"{counts['ran']} episodes recorded, {counts['skipped']} already tried, {counts['success']} "
                f"successes, {counts['kept']} kept, {counts['errors']} errors -> {out} (log {log_path(out)})")
+    if counts["ran"] and counts["errors"] == counts["ran"]:
+        click.echo(f"error: every episode failed to run (see the error fields in {log_path(out)})", err=True)
+        raise SystemExit(1)
 
 
 @click.command("train-policy")
