@@ -15,7 +15,8 @@ import sys
 import pytest
 
 if importlib.util.find_spec("jax") is None or importlib.util.find_spec("mujoco.mjx") is None:
-    pytest.skip("mujoco-mjx / JAX not installed (pip install -e '.[mjx]' or make install-mjx)", allow_module_level=True)
+    pytest.skip("mujoco-mjx / JAX not installed: the optional extra '.[mjx]' (pip install -e '.[mjx]' or make install-mjx)",
+                allow_module_level=True)
 
 from opend_mj.assets.layout import load_manifest  # noqa: E402
 
