@@ -30,16 +30,14 @@ README_END = "<!-- results-table:end -->"
 
 def succeeded(record: dict, criterion: str) -> bool:
     """Whether one episode record succeeded under ``criterion`` (an error record never does)."""
-    if "error" in record:
-        return False
-    if criterion == "open20":
-        return float(record.get("open_ratio") or 0.0) > 0.2
-    if criterion == "open50":
-        return float(record.get("open_ratio") or 0.0) > 0.5
-    if criterion == "range75":
-        from opend_mj.evaluation.scoring import RANGE_THRESHOLD, range_fraction
+    from opend_mj.evaluation.scoring import RANGE_THRESHOLD, _ok, _ok_range
 
-        return (range_fraction(record) or 0.0) >= RANGE_THRESHOLD
+    if criterion == "open20":
+        return _ok(record, 0.2)
+    if criterion == "open50":
+        return _ok(record, 0.5)
+    if criterion == "range75":
+        return bool(_ok_range(record, RANGE_THRESHOLD))
     raise ValueError(f"unknown success criterion {criterion!r}; known: {[c for c, _ in CRITERIA]}")
 
 

@@ -93,26 +93,16 @@ def perceive_handle(solver, rgb, depth, instruction: str, view, planner_config=N
     the box snapped to depth as the planner snaps a learned solver's, one of a pair of pulls, then
     back-projected (:func:`opend_mj.policy.perception.estimate_handle`)."""
     from opend_mj.language import describe_instruction
-    from opend_mj.policy.perception import (
-        estimate_handle,
-        infer_hinge_side,
-        measure_handle,
-        one_of_paired_handles,
-        refine_box_with_depth,
-        snaps_to_depth,
-    )
+    from opend_mj.policy.perception import estimate_handle, infer_hinge_side, measure_handle
     from opend_mj.policy.planner import PlannerConfig
+    from opend_mj.policy.planner.loop import settle_box
 
     config = planner_config or PlannerConfig()
     box = solver.solve(rgb, depth, instruction, view)
     if box is None:
         return None
+    box, _ = settle_box(solver, box, depth, view, config)
     seen = config.perception  # the planner's own depth perception, with the planner's settings
-    if config.locate.refine_with_depth and snaps_to_depth(solver, box):
-        box = refine_box_with_depth(box, depth, view, seen)
-    if config.locate.one_of_paired_handles:
-        single = one_of_paired_handles(box, depth, seen)
-        box = single if single is not None else box
     handle = estimate_handle(box, depth, view, seen)
     if handle is None:
         return None

@@ -41,6 +41,22 @@ RELEASE_BACKOFF = 0.08
 GRASP_FAILED_TRAVEL = 0.03
 
 
+def settle_box(solver, box, depth, view, config) -> tuple:
+    """A solver's box as the planner acts on it: a learned solver's box snapped to the handle standing
+    out of the panel in depth, a box over a pair of pulls narrowed to the nearer one (``config``: a
+    :class:`PlannerConfig`). Returns (box or None, events: the boxes replaced, for the record)."""
+    events = []
+    if config.locate.refine_with_depth and snaps_to_depth(solver, box):
+        events.append({"solver_box": box.to_dict()})
+        box = refine_box_with_depth(box, depth, view, config.perception)
+    if box is not None and config.locate.one_of_paired_handles:
+        single = one_of_paired_handles(box, depth, config.perception)
+        if single is not None:  # a pair of pulls under one box: take the nearer one
+            events.append({"paired_handles_box": box.to_dict()})
+            box = single
+    return box, events
+
+
 class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery):
     """Deterministic open-the-handle controller around a handle solver.
 
@@ -210,14 +226,8 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view, observed=observed)
         else:
             box = self.solver.solve(obs.rgb, obs.depth, obs.instruction, obs.camera_view)
-        if cfg.locate.refine_with_depth and snaps_to_depth(self.solver, box):
-            result.events.append({"solver_box": box.to_dict()})
-            box = refine_box_with_depth(box, obs.depth, obs.camera_view, cfg.perception)
-        if box is not None and cfg.locate.one_of_paired_handles:
-            single = one_of_paired_handles(box, obs.depth, cfg.perception)
-            if single is not None:  # a pair of pulls under one box: take the nearer one
-                result.events.append({"paired_handles_box": box.to_dict()})
-                box = single
+        box, events = settle_box(self.solver, box, obs.depth, obs.camera_view, cfg)
+        result.events.extend(events)
         result.box = box.to_dict() if box is not None else None
         handle = estimate_handle(box, obs.depth, obs.camera_view, cfg.perception) if box is not None else None
         if handle is not None:
