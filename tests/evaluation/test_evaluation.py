@@ -144,3 +144,20 @@ def test_opend_run_with_several_seeds_runs_each_episode_in_each_draw(small_datas
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output
     assert len(load_results(out)) == 2
+
+
+def test_make_jobs_keeps_the_named_targets_and_refuses_an_unknown_one(small_dataset):
+    """`opend run --target ID[:JOINT]` reruns chosen cabinets or single targets (e.g. an earlier
+    run's failures); a target the split does not hold is a clear error, not an empty run."""
+    from opend_mj.assets.layout import load_manifest
+    from opend_mj.evaluation.jobs import make_jobs
+
+    pairs = load_manifest(small_dataset).targets("all")
+    (c0, t0), (c1, _) = pairs[0], next(p for p in pairs if p[0]["id"] != pairs[0][0]["id"])
+    jobs = make_jobs(small_dataset, ["franka"], "oracle", split="all",
+                     targets=[f"{c0['id']}:{t0['joint']}", c1["id"]])
+    n1 = sum(c["id"] == c1["id"] for c, _ in pairs)
+    assert [(j.cabinet, j.joint) for j in jobs][0] == (c0["id"], t0["joint"])
+    assert len(jobs) == 1 + n1 and {j.cabinet for j in jobs} == {c0["id"], c1["id"]}
+    with pytest.raises(ValueError, match="no target nope:joint_9"):
+        make_jobs(small_dataset, ["franka"], "oracle", split="all", targets=["nope:joint_9"])

@@ -65,6 +65,8 @@ def _check_cabinets(ctx, param, value):
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, callback=_check_cabinets)
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--target", "targets", multiple=True, metavar="ID[:JOINT]",
+              help="Only this cabinet (every target) or this target of it, e.g. 45780:joint_1 (repeatable).")
 @click.option("--seed", "seeds", type=int, multiple=True, default=(0,), show_default=True,
               help="Episode seed: each cabinet's room, light and camera. Repeat to run every episode "
                    "in several draws of the scenes (one record per seed; `opend score` pools them).")
@@ -89,7 +91,7 @@ def _check_cabinets(ctx, param, value):
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.pass_context
-def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, seeds, video_dir, light_scale,
+def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, seeds, video_dir, light_scale,
         pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
@@ -126,10 +128,13 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
             raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
     elif policy_args:
         raise click.UsageError("--policy-arg needs --policy")
-    jobs = [job for seed in dict.fromkeys(seeds)
-            for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
-                                 pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
-                                 physics_timestep=physics_timestep)]
+    try:
+        jobs = [job for seed in dict.fromkeys(seeds)
+                for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
+                                     pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
+                                     physics_timestep=physics_timestep, targets=targets or None)]
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), ctx, param_hint="--target") from None
     if policy_spec is not None:
         jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if instruction_file is not None:

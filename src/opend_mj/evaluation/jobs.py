@@ -12,13 +12,25 @@ from opend_mj.evaluation.episode import EpisodeJob, scene_key
 def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str = "test", seed: int = 0,
               light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
               video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
-              paraphrase: int = 0, physics_timestep: float | None = None) -> list[EpisodeJob]:
+              paraphrase: int = 0, physics_timestep: float | None = None,
+              targets: Iterable[str] | None = None) -> list[EpisodeJob]:
+    """Episodes of a run, hand by hand over the split's (cabinet, target) pairs in manifest order.
+
+    ``cabinet_ids`` keeps whole cabinets; ``targets`` keeps ``"ID"`` (every target of a cabinet) or
+    ``"ID:JOINT"`` (one target), e.g. to rerun the failures of an earlier run.
+    """
     cabinets_dir = Path(cabinets_dir)
     manifest = load_manifest(cabinets_dir)
     pairs = manifest.targets(split)
     if cabinet_ids is not None:
         ids = set(cabinet_ids)
         pairs = [(c, t) for c, t in pairs if c["id"] in ids]
+    if targets is not None:
+        wanted = set(targets)
+        pairs = [(c, t) for c, t in pairs if c["id"] in wanted or f"{c['id']}:{t['joint']}" in wanted]
+        found = {c["id"] for c, _ in pairs} | {f"{c['id']}:{t['joint']}" for c, t in pairs}
+        if wanted - found:
+            raise ValueError(f"{cabinets_dir}: no target {', '.join(sorted(wanted - found))} in split {split!r}")
     if limit is not None:
         pairs = pairs[:limit]
     jobs = []
