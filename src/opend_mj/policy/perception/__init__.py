@@ -10,7 +10,7 @@
 """
 
 from opend_mj.policy.perception.config import PerceptionConfig
-from opend_mj.policy.perception.door import door_edges, infer_hinge_side
+from opend_mj.policy.perception.door import door_edges, door_edges_vertical, infer_hinge_side
 from opend_mj.policy.perception.front import FrontMotionConfig, front_motion
 from opend_mj.policy.perception.handle import (
     HandleEstimate,
@@ -30,7 +30,7 @@ from opend_mj.policy.perception.proposals import (
 
 __all__ = [
     "FrontMotionConfig", "HandleEstimate", "HandleShape", "PerceptionConfig", "ProposalConfig",
-    "ThinProposalConfig", "door_edges", "estimate_handle", "front_motion", "handle_proposals",
+    "ThinProposalConfig", "door_edges", "door_edges_vertical", "estimate_handle", "front_motion", "handle_proposals",
     "infer_hinge_side", "measure_handle", "one_of_paired_handles", "refine_box_with_depth",
     "snaps_to_depth", "thin_proposals",
 ]

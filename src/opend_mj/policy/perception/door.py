@@ -44,6 +44,38 @@ def door_edges(handle: HandleEstimate, depth: np.ndarray, view,
     return reach(-1), reach(+1)  # image-left is +y
 
 
+def door_edges_vertical(handle: HandleEstimate, depth: np.ndarray, view,
+                        config: PerceptionConfig = PerceptionConfig()) -> tuple[float, float] | None:
+    """World z of where the door's front plane ends above and below the handle, along the image
+    column through it (as :func:`door_edges` does along the row): a flap hinged at its top or
+    bottom edge has its handle near the other edge."""
+    tolerance, gap_pixels = config.plane_tolerance, config.plane_gap_pixels
+    h, w = depth.shape
+    uc, vc = view.project(handle.centre[None, :])[0]
+    if not (np.isfinite(uc) and np.isfinite(vc)):
+        return None
+    col = int(np.clip(uc, 0, w - 1))
+    rows = np.arange(h) + 0.5
+    points = view.backproject(np.full(h, col + 0.5), rows, depth[:, col])
+    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
+    start = int(np.clip(vc, 0, h - 1))
+    half = float(handle.size[1]) / 2 + config.handle_margin
+    beside = np.abs(points[:, 2] - float(handle.centre[2])) > half
+    beside[~np.isfinite(points[:, 2])] = True
+
+    def reach(step: int) -> float:
+        row, misses, last = start, 0, start
+        while 0 <= row < h and misses <= gap_pixels:
+            if on_plane[row]:
+                last, misses = row, 0
+            elif beside[row]:
+                misses += 1
+            row += step
+        return float(points[last, 2])
+
+    return reach(-1), reach(+1)  # image-up is +z
+
+
 def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view,
                      config: PerceptionConfig = PerceptionConfig()) -> str | None:
     """Which side a single door hinges on, from the depth image alone.

@@ -167,6 +167,16 @@ class DoorConfig:
     #: panel on one side
     yaw_gain: float = 1.0
     yaw_lead_deg: float = 0.0
+    #: flaps (doors hinged about a horizontal axis; :mod:`~opend_mj.policy.planner.flap`): seen once the held handle rose
+    #: or sank ``flap_min_rise`` (m), within a factor ``flap_rise_ratio`` of the rise a circle about
+    #: the front's far edge (seen in depth) predicts; then pulled along the circle whose radius the
+    #: held path sets, between ``flap_min_radius_share`` x that edge's distance and the distance;
+    #: the hand pitches with the flap by ``tilt_gain`` x its angle
+    flap_pull: bool = True
+    flap_min_rise: float = 0.01
+    flap_rise_ratio: float = 2.0
+    flap_min_radius_share: float = 0.5
+    tilt_gain: float = 1.0
     #: pull this many degrees beyond the pull direction, in the sense of the turn
     pull_bias_deg: float = 0.0
     #: stop once the site came back toward the cabinet (+x) this far (m) from the farthest it got:

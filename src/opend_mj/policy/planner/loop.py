@@ -201,7 +201,7 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             status = self.pull(robot, grasp, door, state, result)
             if status == "wrong_kind":
                 return status, state, grasp
-            if status == "slipped" and (abs(state.turned) >= cfg.pulling.door_done_deg if door
+            if status == "slipped" and (state.swung() >= cfg.pulling.door_done_deg if door
                                         else state.travelled >= cfg.pulling.drawer_done):
                 status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
             if status == "done":

@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from opend_mj.policy.planner.flap import FlapSteering
 from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
-from opend_mj.transforms import turn_about_z
+from opend_mj.transforms import axis_angle_quat, quat_mul, turn_about_z
 
 #: Seconds a pull may last beyond the time its remaining travel needs at the pull speed.
 PULL_SLACK_TIME = 3.0
@@ -26,7 +27,8 @@ PULL_SLACK_TIME = 3.0
 def _ended(result: PlanResult, state: PullState, status: str, why: str) -> str:
     """Record why a pull ended (``{"pull_end": why, ...}``: "stall", "travel", "back_stop", "time",
     "steps", "slipped" or "wrong_kind") with its travel (m) and turn (deg); returns ``status``."""
-    result.events.append({"pull_end": why, "travelled": round(state.travelled, 4), "turned": round(state.turned, 1)})
+    result.events.append({"pull_end": why, "travelled": round(state.travelled, 4), "turned": round(state.turned, 1),
+                          "tilt": round(state.peak_tilt, 1)})
     return status
 
 
@@ -49,7 +51,7 @@ class PullRun:
     least_x: float = 0.0  # the site's smallest x so far (m)
 
 
-class Pulling:
+class Pulling(FlapSteering):
     """The pull stage of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
     ``hand``, ``state``, :meth:`holding`, :meth:`judge_kind`, :meth:`_stage`, :meth:`_time_left`)."""
 
@@ -125,6 +127,11 @@ class Pulling:
         """A door's pull direction and the hand's yaw: from the observed motion (no hinge), or the
         circle about the hinge seen in depth."""
         cfg = self.config.door
+        if state.flap is None and cfg.flap_pull:
+            state.flap = self._flap_seen(state, result)
+        if state.flap is not None:
+            self._steer_flap(site, run, state)
+            return
         if len(run.history) > cfg.direction_window:
             self._follow_motion(site, run, state, result)
         if state.hinge is not None:
@@ -137,7 +144,7 @@ class Pulling:
 
     def _follow_motion(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
         """Turn the pull direction toward the site's motion over the last ``direction_window``
-        steps (low-passed); drop a hinge that the motion contradicts."""
+        steps (low-passed, in the horizontal plane); drop a hinge that the motion contradicts."""
         cfg = self.config.door
         motion = run.history[-1] - run.history[-1 - cfg.direction_window]
         motion[2] = 0.0
@@ -169,11 +176,21 @@ class Pulling:
             state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
             run.quat = self._yawed(state, ang)
 
-    def _yawed(self, state: PullState, ang: float) -> np.ndarray:
-        """The site orientation for a pull direction turned ``ang`` (deg): the grasp's, turned about z."""
+    def _yawed(self, state: PullState, ang: float, tilt: float = 0.0) -> np.ndarray:
+        """The site orientation for a pull direction turned ``ang`` (deg) about z and tilted
+        ``tilt`` (deg, up positive) out of the horizontal: the grasp's, turned about z, then pitched
+        about the horizontal axis across the pull (the hand stays square to a flap it holds)."""
         cfg = self.config.door
         yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
-        return turn_about_z(state.quat0, math.radians(yaw))
+        quat = turn_about_z(state.quat0, math.radians(yaw))
+        if tilt == 0.0:
+            return quat
+        a = math.radians(ang)
+        b = state.base_dir
+        h = np.array([b[0] * math.cos(a) - b[1] * math.sin(a), b[0] * math.sin(a) + b[1] * math.cos(a), 0.0])
+        axis = np.cross(h, np.array([0.0, 0.0, 1.0]))  # rotating h about it by +tilt lifts it
+        q = quat_mul(axis_angle_quat(axis, math.radians(cfg.tilt_gain * tilt)), quat)
+        return q / np.linalg.norm(q)
 
     def _advance(self, robot, site, run: PullRun, g: GraspChoice, state: PullState, dt: float) -> None:
         """Move the target along the pull direction (biased for doors), at most ``lead`` ahead of
@@ -206,7 +223,8 @@ class Pulling:
         if state.travelled >= travel_max:
             return "travel"
         site = run.history[-1]
-        back_stop = cfg.door.back_stop is not None and (state.hinge is None or cfg.door.back_stop_with_hinge)
+        back_stop = cfg.door.back_stop is not None and state.flap is None \
+            and (state.hinge is None or cfg.door.back_stop_with_hinge)
         if run.door and back_stop:
             run.least_x = min(run.least_x, float(site[0]))
             if float(site[0]) - run.least_x > cfg.door.back_stop:

@@ -72,6 +72,18 @@ class GraspChoice:
 
 
 @dataclass
+class Flap:
+    """A door hinged about a horizontal axis at its front's top (``sign`` +1: it lifts) or bottom
+    edge (-1: it drops): the held site where its pull began (m), the horizontal unit vector the
+    handle comes out along, and the distance (m) from the start to that edge (the largest radius)."""
+
+    start: np.ndarray
+    out: np.ndarray
+    sign: float
+    reach: float
+
+
+@dataclass
 class PullState:
     """What a pull knows and keeps across re-grasps: its direction, turn and the held track."""
 
@@ -89,6 +101,14 @@ class PullState:
     sense: float = 0.0
     opened: float = 0.0  # the largest door angle (deg) reached while the grip held
     peak_turn: float = 0.0  # the pull direction's farthest turn (deg, signed) without a hinge
+    tilt: float = 0.0  # the pull direction's tilt out of the horizontal (deg, up positive)
+    peak_tilt: float = 0.0  # its largest (deg, signed): a flap's swing
+    flap: "Flap | None" = None  # a flap seen by the held handle's rise (kept across re-grasps)
+    front_z: tuple | None = None  # the front's top and bottom edge z (m) seen in depth; () unseen
+
+    def swung(self) -> float:
+        """How far (deg) the held door swung: its turn about z, or a flap's tilt."""
+        return max(abs(self.turned), abs(self.peak_tilt))
     held_back: bool = False  # a direction turning back from ``peak_turn`` was not taken
     #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
     pull_start: int = 0

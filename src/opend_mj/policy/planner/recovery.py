@@ -26,8 +26,8 @@ class PushRecovery:
         (+1 / -1), how far it opened (rad)): from the handle's held path where that agrees with the
         hinge seen in depth, else from the hinge seen in depth. None when neither is known."""
         cfg = self.config.recovery
-        if len(state.track) < cfg.push_min_track:
-            return None
+        if len(state.track) < cfg.push_min_track or state.flap is not None:
+            return None  # too short, or a flap's (its hinge is horizontal: no side door's arc)
         track = np.array(state.track)
         p0 = track[0]
         seen = self.state.hinge

@@ -1,0 +1,99 @@
+"""Flaps: doors hinged about a horizontal axis (at their top edge: they lift up; at their bottom
+edge: they drop down), whose handle swings on a circle in the vertical plane.
+
+The instruction says only "door", and a flap's front looks like a side door's in one image, so the
+planner starts every door's pull as a side door's. What tells a flap is what the hand feels: the
+held handle rises (or sinks) as it comes out, by as much as a circle about a hinge at the front's
+far edge predicts. The front's top and bottom edges come from the depth image
+(:func:`~opend_mj.policy.perception.door_edges_vertical`), the same way a side door's hinge line does
+(:func:`~opend_mj.policy.perception.door_edges`): a handle sits near a front's free edge, its hinge
+at the other one. The front may continue past the flap's own edge (a coplanar front beside it), so
+the edge is only an upper bound on the radius; the held path's own circle sets it within that bound.
+Once seen, the pull follows that circle's opening tangent (the flap's outward normal) and the hand
+pitches with it, so that the grip does not twist off the bar.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from opend_mj.policy.perception import door_edges_vertical
+from opend_mj.policy.planner.records import Flap, PlanResult, PullState
+
+
+class FlapSteering:
+    """Flap detection and steering for :class:`~opend_mj.policy.planner.pull.Pulling` (uses the
+    planner's ``config.door``, ``state`` (the handle and the first observation) and ``_yawed``)."""
+
+    def _front_edges_z(self, state: PullState):
+        """World z of the front's top and bottom edges above and below the handle (cached per pull
+        state; None where unseen)."""
+        if state.front_z is None:
+            handle, first = self.state.handle, self.state.first
+            edges = None
+            if handle is not None and first is not None and first.depth is not None:
+                edges = door_edges_vertical(handle, first.depth, first.camera_view, self.config.perception)
+            state.front_z = edges if edges is not None else ()
+        return state.front_z or None
+
+    def _flap_seen(self, state: PullState, result: PlanResult) -> Flap | None:
+        """A flap where the held path rises or sinks ``flap_min_rise`` (m) or more, within a factor
+        ``flap_rise_ratio`` of what a circle about the front's far edge (above for a rising handle,
+        below for a sinking one) predicts for the horizontal distance it came out; None otherwise."""
+        cfg = self.config.door
+        if len(state.track) < 2:
+            return None
+        p0, p = np.asarray(state.track[0], float), np.asarray(state.track[-1], float)
+        dz = float(p[2] - p0[2])
+        out = p[:2] - p0[:2]
+        dh = float(np.linalg.norm(out))
+        if abs(dz) < cfg.flap_min_rise or dh < 1e-3:
+            return None
+        edges = self._front_edges_z(state)
+        if edges is None:
+            return None
+        sign = 1.0 if dz > 0 else -1.0
+        reach = float(edges[0] - p0[2]) if sign > 0 else float(p0[2] - edges[1])
+        lo, hi = cfg.hinge_radius_range
+        if not (lo <= reach <= hi) or dh >= reach:
+            return None
+        predicted = reach - math.sqrt(reach * reach - dh * dh)  # the rise on the far edge's circle
+        ratio = abs(dz) / max(predicted, 1e-6)
+        if not (1.0 / cfg.flap_rise_ratio <= ratio <= cfg.flap_rise_ratio):
+            return None
+        flap = Flap(start=p0, out=np.array([out[0], out[1], 0.0]) / dh, sign=sign, reach=reach)
+        result.events.append({"flap": {"hinge": "top" if sign > 0 else "bottom", "reach": round(reach, 3),
+                                       "rise": round(dz, 4), "out": round(dh, 4)}})
+        state.hinge = None  # a side door's hinge line seen in depth is not this part's
+        return flap
+
+    def _flap_radius(self, flap: Flap, state: PullState) -> float:
+        """The flap's radius: the held path's circle through its start, tangent to the front there
+        (least squares), within ``flap_min_radius_share`` x the far edge's reach and the reach."""
+        cfg = self.config.door
+        track = np.asarray(state.track, float) - flap.start
+        u = track[:, :2] @ flap.out[:2]
+        w = track[:, 2] * flap.sign
+        den = 2.0 * float(w @ w)
+        if den < 1e-9:
+            return flap.reach
+        fit = float(((u * u + w * w) * w).sum()) / den
+        return float(np.clip(fit, cfg.flap_min_radius_share * flap.reach, flap.reach))
+
+    def _steer_flap(self, site, run, state: PullState) -> None:
+        """Pull along the flap's circle: the opening tangent at the site, the hand pitched by the
+        flap's angle (``state.tilt``, deg, rising positive)."""
+        flap = state.flap
+        radius = self._flap_radius(flap, state)
+        centre = flap.start + np.array([0.0, 0.0, flap.sign * radius])
+        d = site - centre
+        u = float(d[:2] @ flap.out[:2])
+        w = float(d[2])
+        norm = max(1e-6, math.hypot(u, w))
+        t_u, t_w = flap.sign * -w / norm, flap.sign * u / norm
+        state.direction = t_u * flap.out + np.array([0.0, 0.0, t_w])
+        state.tilt = math.degrees(math.atan2(t_w, t_u))
+        state.peak_tilt = state.tilt if abs(state.tilt) > abs(state.peak_tilt) else state.peak_tilt
+        run.quat = self._yawed(state, state.turned, state.tilt)
