@@ -171,11 +171,13 @@ class DoorConfig:
     #: or sank ``flap_min_rise`` (m), within a factor ``flap_rise_ratio`` of the rise a circle about
     #: the front's far edge (seen in depth) predicts; then pulled along the circle whose radius the
     #: held path sets, between ``flap_min_radius_share`` x that edge's distance and the distance;
-    #: the hand pitches with the flap by ``tilt_gain`` x its angle
+    #: the hand pitches with the flap by ``tilt_gain`` x its angle. A path whose chord turned more
+    #: than ``flap_max_turn_deg`` about z came out as a side door's
     flap_pull: bool = True
     flap_min_rise: float = 0.01
     flap_rise_ratio: float = 2.0
     flap_min_radius_share: float = 0.5
+    flap_max_turn_deg: float = 12.0
     tilt_gain: float = 1.0
     #: pull this many degrees beyond the pull direction, in the sense of the turn
     pull_bias_deg: float = 0.0

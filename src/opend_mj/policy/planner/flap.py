@@ -41,16 +41,23 @@ class FlapSteering:
     def _flap_seen(self, state: PullState, result: PlanResult) -> Flap | None:
         """A flap where the held path rises or sinks ``flap_min_rise`` (m) or more, within a factor
         ``flap_rise_ratio`` of what a circle about the front's far edge (above for a rising handle,
-        below for a sinking one) predicts for the horizontal distance it came out; None otherwise."""
+        below for a sinking one) predicts for the horizontal distance it came out, and came out
+        straight (its chord turned at most ``flap_max_turn_deg`` from the pull's start direction);
+        None otherwise, and never for a vertical bar."""
         cfg = self.config.door
-        if len(state.track) < 2:
-            return None
+        handle = self.state.handle
+        if len(state.track) < 2 or (handle is not None and handle.kind == "bar" and handle.orientation == "vertical"):
+            return None  # a hand slides up and down a vertical bar: its rise is not the part's
         p0, p = np.asarray(state.track[0], float), np.asarray(state.track[-1], float)
         dz = float(p[2] - p0[2])
         out = p[:2] - p0[:2]
         dh = float(np.linalg.norm(out))
         if abs(dz) < cfg.flap_min_rise or dh < 1e-3:
             return None
+        base = state.base_dir
+        chord_turn = abs(math.degrees(math.atan2(base[0] * out[1] - base[1] * out[0], float(base[:2] @ out))))
+        if chord_turn > cfg.flap_max_turn_deg:
+            return None  # the handle came out turning about a vertical axis: a side door's
         edges = self._front_edges_z(state)
         if edges is None:
             return None
@@ -65,7 +72,8 @@ class FlapSteering:
             return None
         flap = Flap(start=p0, out=np.array([out[0], out[1], 0.0]) / dh, sign=sign, reach=reach)
         result.events.append({"flap": {"hinge": "top" if sign > 0 else "bottom", "reach": round(reach, 3),
-                                       "rise": round(dz, 4), "out": round(dh, 4)}})
+                                       "rise": round(dz, 4), "out": round(dh, 4),
+                                       "turn": round(chord_turn, 1)}})
         state.hinge = None  # a side door's hinge line seen in depth is not this part's
         return flap
 
