@@ -138,6 +138,13 @@ class PullConfig:
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, deg) is a finished pull
     drawer_done: float = 0.25
     door_done_deg: float = 80.0
+    #: a drawer whose handle came out less than ``drawer_stuck_travel`` (m) while held (the pull
+    #: stalled, or the hand came off it) does not slide this way: with ``drawer_slide`` it is
+    #: grasped again and slid along its front, across its bar (a sliding panel: a vertical bar
+    #: slides sideways, a horizontal one up or down), first toward where the front reaches farther
+    #: from the handle (a handle sits at a panel's leading edge), then the other way
+    drawer_stuck_travel: float = 0.03
+    drawer_slide: bool = True
 
 
 @dataclass(frozen=True)

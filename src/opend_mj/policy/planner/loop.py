@@ -201,6 +201,10 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             status = self.pull(robot, grasp, door, state, result)
             if status == "wrong_kind":
                 return status, state, grasp
+            if status == "stuck":  # a drawer that did not come out: slide it along its front
+                status = "slipped"
+                if not self.next_slide(state, result):
+                    break
             if status == "slipped" and (state.swung() >= cfg.pulling.door_done_deg if door
                                         else state.travelled >= cfg.pulling.drawer_done):
                 status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)

@@ -18,6 +18,7 @@ import numpy as np
 
 from opend_mj.policy.planner.flap import FlapSteering
 from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
+from opend_mj.policy.planner.slide import PanelSliding
 from opend_mj.transforms import axis_angle_quat, quat_mul, turn_about_z
 
 #: Seconds a pull may last beyond the time its remaining travel needs at the pull speed.
@@ -51,14 +52,16 @@ class PullRun:
     least_x: float = 0.0  # the site's smallest x so far (m)
 
 
-class Pulling(FlapSteering):
+class Pulling(FlapSteering, PanelSliding):
     """The pull stage of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
     ``hand``, ``state``, :meth:`holding`, :meth:`judge_kind`, :meth:`_stage`, :meth:`_time_left`)."""
 
     def pull(self, robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
         """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
         the hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did),
-        or the held handle showed the other kind than the instruction's ("wrong_kind")."""
+        or the held handle showed the other kind than the instruction's ("wrong_kind"), or a
+        drawer's handle did not come along this direction (it stalled, or the hand came off it,
+        within ``drawer_stuck_travel``: "stuck")."""
         cfg = self.config.pulling
         self._stage(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
@@ -83,9 +86,27 @@ class Pulling(FlapSteering):
                 self._steer_door(site, run, state, result)
             self._advance(robot, site, run, g, state, dt)
             why = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
+            if why == "stall" and not door and cfg.drawer_slide and self._did_not_come(robot, run, state, site):
+                return _ended(result, state, "stuck", "stuck")
             if why is not None:
                 return _ended(result, state, "done", why)
         return _ended(result, state, "done", "steps")
+
+    def _did_not_come(self, robot, run: PullRun, state: PullState, site) -> bool:
+        """Whether a drawer did not come out with the hand along this direction (it slides another
+        way, or not at all): its front, seen again, moved less than ``drawer_stuck_travel`` (m)
+        toward the camera (:meth:`front_seen`: None where nothing moved) while the hand held it
+        less than ``slip_distance`` (m) along the pull; a robot that cannot look again: the handle
+        came out less than ``drawer_stuck_travel`` while held."""
+        cfg = self.config.pulling
+        held_to = run.last_touch if run.last_touch is not None else site
+        held = float((held_to - run.start) @ state.direction)
+        if getattr(robot, "look", None) is None:
+            return held < cfg.drawer_stuck_travel
+        if held >= cfg.slip_distance:
+            return False
+        seen = self.front_seen(robot, site)
+        return seen is None or float(seen["shift"]) < cfg.drawer_stuck_travel
 
     # ---------------------------------------------------------------- one control step
     def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> str | None:
@@ -107,9 +128,12 @@ class Pulling(FlapSteering):
             run.last_touch = site.copy()
         away = float(np.linalg.norm(site - run.last_touch))
         slip_n = max(2, int(round(cfg.pulling.slip_time / robot.control_dt)))
-        if run.quiet >= slip_n and away >= cfg.pulling.slip_distance and (run.door or cfg.pulling.drawer_slips):
-            result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
-            return "slipped"
+        if run.quiet >= slip_n and away >= cfg.pulling.slip_distance:
+            if run.door or cfg.pulling.drawer_slips:
+                result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
+                return "slipped"
+            if cfg.pulling.drawer_slide and self._did_not_come(robot, run, state, site):
+                return "stuck"  # the hand came off a drawer that did not come with it
         if held:
             state.last_held = (site.copy(), run.quat.copy())
             if len(state.track) > state.pull_start:

@@ -105,6 +105,7 @@ class PullState:
     peak_tilt: float = 0.0  # its largest (deg, signed): a flap's swing
     flap: "Flap | None" = None  # a flap seen by the held handle's rise (kept across re-grasps)
     front_z: tuple | None = None  # the front's top and bottom edge z (m) seen in depth; () unseen
+    slides: list | None = None  # directions still to slide a drawer that did not come out
 
     def swung(self) -> float:
         """How far (deg) the held door swung: its turn about z, or a flap's tilt."""
