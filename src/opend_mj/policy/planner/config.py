@@ -138,8 +138,10 @@ class PullConfig:
     #: a grip lost beyond this much travel (drawers, m) or turn (doors, deg) is a finished pull
     drawer_done: float = 0.25
     door_done_deg: float = 80.0
-    #: a drawer whose handle came out less than ``drawer_stuck_travel`` (m) while held (the pull
-    #: stalled, or the hand came off it) does not slide this way: with ``drawer_slide`` it is
+    #: a drawer that the hand held less than ``slip_distance`` along the pull (it stalled, or the
+    #: hand came off it) and whose front, seen again, did not move (a robot that cannot look
+    #: again: whose handle came out less than ``drawer_stuck_travel`` (m) while held) does not
+    #: slide this way: with ``drawer_slide`` it is
     #: grasped again and slid along its front, across its bar (a sliding panel: a vertical bar
     #: slides sideways, a horizontal one up or down), first toward where the front reaches farther
     #: from the handle (a handle sits at a panel's leading edge), then the other way

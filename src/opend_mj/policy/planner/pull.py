@@ -50,6 +50,7 @@ class PullRun:
     held_path: float = 0.0  # length (m) of the held path so far (the kind is judged once long enough)
     watch_kind: bool = True  # the kind is judged once per pull
     least_x: float = 0.0  # the site's smallest x so far (m)
+    front_moved: bool = False  # a drawer's front was seen moving out during this pull
 
 
 class Pulling(FlapSteering, PanelSliding):
@@ -94,19 +95,20 @@ class Pulling(FlapSteering, PanelSliding):
 
     def _did_not_come(self, robot, run: PullRun, state: PullState, site) -> bool:
         """Whether a drawer did not come out with the hand along this direction (it slides another
-        way, or not at all): its front, seen again, moved less than ``drawer_stuck_travel`` (m)
-        toward the camera (:meth:`front_seen`: None where nothing moved) while the hand held it
-        less than ``slip_distance`` (m) along the pull; a robot that cannot look again: the handle
-        came out less than ``drawer_stuck_travel`` while held."""
+        way, or not at all): the hand held it less than ``slip_distance`` (m) along the pull, and
+        its front, seen again, did not move (:meth:`front_seen` is None: too few pixels came 2 cm
+        or more toward the camera; looked at once per pull, and a front seen moving is kept). A
+        robot that cannot look again: the handle came out less than ``drawer_stuck_travel`` (m)
+        while held."""
         cfg = self.config.pulling
         held_to = run.last_touch if run.last_touch is not None else site
         held = float((held_to - run.start) @ state.direction)
         if getattr(robot, "look", None) is None:
             return held < cfg.drawer_stuck_travel
-        if held >= cfg.slip_distance:
+        if held >= cfg.slip_distance or run.front_moved:
             return False
-        seen = self.front_seen(robot, site)
-        return seen is None or float(seen["shift"]) < cfg.drawer_stuck_travel
+        run.front_moved = self.front_seen(robot, site) is not None
+        return not run.front_moved
 
     # ---------------------------------------------------------------- one control step
     def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> str | None:
