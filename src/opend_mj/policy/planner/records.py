@@ -103,19 +103,19 @@ class PullState:
     peak_turn: float = 0.0  # the pull direction's farthest turn (deg, signed) without a hinge
     tilt: float = 0.0  # the pull direction's tilt out of the horizontal (deg, up positive)
     peak_tilt: float = 0.0  # its largest (deg, signed): a flap's swing
-    flap: "Flap | None" = None  # a flap seen by the held handle's rise (kept across re-grasps)
+    flap: Flap | None = None  # a flap seen by the held handle's rise (kept across re-grasps)
     front_z: tuple | None = None  # the front's top and bottom edge z (m) seen in depth; () unseen
     slides: list | None = None  # directions still to slide a drawer that did not come out
-
-    def swung(self) -> float:
-        """How far (deg) the held door swung: its turn about z, or a flap's tilt."""
-        return max(abs(self.turned), abs(self.peak_tilt))
     held_back: bool = False  # a direction turning back from ``peak_turn`` was not taken
     #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
     pull_start: int = 0
     seen_kind: str | None = None
     seen_by: str = ""  # "path" (the held handle's) or "front" (the camera's)
     seen_turn: float = 0.0
+
+    def swung(self) -> float:
+        """How far (deg) the held door swung: its turn about z, or a flap's tilt."""
+        return max(abs(self.turned), abs(self.peak_tilt))
 
 
 @dataclass
