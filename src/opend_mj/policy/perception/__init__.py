@@ -30,7 +30,7 @@ from opend_mj.policy.perception.proposals import (
 
 __all__ = [
     "FrontMotionConfig", "HandleEstimate", "HandleShape", "PerceptionConfig", "ProposalConfig",
-    "ThinProposalConfig", "door_edges", "door_edges_vertical", "estimate_handle", "front_motion", "handle_proposals",
-    "infer_hinge_side", "measure_handle", "one_of_paired_handles", "refine_box_with_depth",
+    "ThinProposalConfig", "door_edges", "door_edges_vertical", "estimate_handle", "front_motion",
+    "handle_proposals", "infer_hinge_side", "measure_handle", "one_of_paired_handles", "refine_box_with_depth",
     "snaps_to_depth", "thin_proposals",
 ]
