@@ -77,10 +77,42 @@ class FlapSteering:
         state.hinge = None  # a side door's hinge line seen in depth is not this part's
         return flap
 
+    def _flap_looked(self, robot, site, run, state: PullState, result: PlanResult) -> Flap | None:
+        """A flap seen by the camera, for a hand that holds too loosely to record a held path: once
+        per pull state, when the site came ``flap_look_distance`` (m) out, a new depth image shows
+        the front around the handle shifted toward the camera more along z than across it (its
+        shift's slope up the front at least ``flap_front_slope``, across it at most half that): a
+        flap hinged at its top edge where the lower part came out more, else at its bottom edge."""
+        cfg = self.config.door
+        handle = self.state.handle
+        if state.flap_looked or float(np.linalg.norm(site - run.start)) < cfg.flap_look_distance \
+                or (handle is not None and handle.kind == "bar" and handle.orientation == "vertical"):
+            return None
+        state.flap_looked = True
+        front = self.front_seen(robot, site)
+        if front is None or abs(front["up"]) < cfg.flap_front_slope or abs(front["across"]) > abs(front["up"]) / 2:
+            return None
+        edges = self._front_edges_z(state)
+        if edges is None:
+            return None
+        start = np.asarray(run.start, float)
+        sign = 1.0 if front["up"] < 0 else -1.0  # the lower part came out more: hinged at the top
+        reach = float(edges[0] - start[2]) if sign > 0 else float(start[2] - edges[1])
+        out = site[:2] - start[:2]
+        dh = float(np.linalg.norm(out))
+        if not (cfg.hinge_radius_range[0] <= reach <= cfg.hinge_radius_range[1]) or dh < 1e-3:
+            return None
+        result.events.append({"flap": {"hinge": "top" if sign > 0 else "bottom", "reach": round(reach, 3),
+                                       "seen_up": round(float(front["up"]), 3), "out": round(dh, 4)}})
+        state.hinge = None
+        return Flap(start=start, out=np.array([out[0], out[1], 0.0]) / dh, sign=sign, reach=reach)
+
     def _flap_radius(self, flap: Flap, state: PullState) -> float:
         """The flap's radius: the held path's circle through its start, tangent to the front there
         (least squares), within ``flap_min_radius_share`` x the far edge's reach and the reach."""
         cfg = self.config.door
+        if len(state.track) < 2:
+            return flap.reach
         track = np.asarray(state.track, float) - flap.start
         u = track[:, :2] @ flap.out[:2]
         w = track[:, 2] * flap.sign

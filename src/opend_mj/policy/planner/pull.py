@@ -84,7 +84,7 @@ class Pulling(FlapSteering, PanelSliding):
                 return _ended(result, state, status, status)
             run.history.append(site.copy())
             if door:
-                self._steer_door(site, run, state, result)
+                self._steer_door(robot, site, run, state, result)
             self._advance(robot, site, run, g, state, dt)
             why = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
             if why == "stall" and not door and cfg.drawer_slide and self._did_not_come(robot, run, state, site):
@@ -149,12 +149,12 @@ class Pulling(FlapSteering, PanelSliding):
                         return "wrong_kind"
         return None
 
-    def _steer_door(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
+    def _steer_door(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
         """A door's pull direction and the hand's yaw: from the observed motion (no hinge), or the
         circle about the hinge seen in depth."""
         cfg = self.config.door
         if state.flap is None and cfg.flap_pull:
-            state.flap = self._flap_seen(state, result)
+            state.flap = self._flap_seen(state, result) or self._flap_looked(robot, site, run, state, result)
         if state.flap is not None:
             self._steer_flap(site, run, state)
             return
