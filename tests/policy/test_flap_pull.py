@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from opend_mj.policy.planner import GraspChoice, Planner, PlannerConfig, PlanResult, PullState
+from opend_mj.policy.planner import GraspChoice, Observation, Planner, PlannerConfig, PlanResult, PullState
 from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
@@ -145,3 +145,91 @@ def test_the_fronts_top_and_bottom_edges_from_depth(handle_z):
                             size=(0.2, 0.016), front_x=0.96, panel_x=1.0)
     top, bottom = door_edges_vertical(handle, depth, view)
     assert top == pytest.approx(0.3, abs=0.004) and bottom == pytest.approx(-0.3, abs=0.004)
+
+
+class LooseFlap(HeldFlap):
+    """A flap hooked by fingers that feel nothing (the Allegro's loose hook on a thin bar): the hand
+    touches only with its palm, which is no hold, so no held path is recorded; the robot can look
+    again. The closed front is a plane at
+    x = ``PANEL_X`` spanning y in [-0.3, 0.3] and z from the handle's edge to the hinge's, seen by a
+    camera at (0, 0, ``START_Z``) looking along +x."""
+
+    def __init__(self, sign: float, radius: float, travel: float):
+        super().__init__(sign, radius, travel)
+        self.x0 = PANEL_X - 0.035  # the bar's centre, 3.5 cm in front of the panel
+
+    def handle_pos(self) -> np.ndarray:
+        a = self.opening
+        return np.array([self.x0 - self.radius * math.sin(a), 0.0,
+                         self.hinge_z - self.sign * self.radius * math.cos(a)])
+
+    def step(self, site_pos, site_quat, fingers) -> None:
+        p = np.asarray(site_pos, float)
+        super().step(p - np.array([self.x0 + 0.03, 0.0, 0.0]), site_quat, fingers)  # the parent's frame
+
+    def contact_touch(self) -> dict:
+        return {"palm": 5.0} if self.held else {}
+
+    def look(self) -> np.ndarray:
+        return _flap_depth(self.sign, self.radius, self.opening)
+
+
+PANEL_X = 1.0
+
+
+def _flap_view():
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+    return CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.array([0.0, 0.0, START_Z]), rot)
+
+
+def _flap_depth(sign: float, radius: float, opening: float) -> np.ndarray:
+    """Depth (along +x) of a flap turned ``opening`` (rad) about its hinge line (x = ``PANEL_X``,
+    z = ``START_Z`` + sign x radius, along y), its free edge 5 cm beyond the handle, in front of a
+    far wall."""
+    view = _flap_view()
+    cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
+    ray = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size)) - view.pos  # x = 1 per ray
+    hinge_z = START_Z + sign * radius
+    # points of the flap: x = PANEL_X - s sin(a), z = hinge_z - sign s cos(a) for s in [0, radius + 0.05]
+    t_a = math.tan(opening)
+    # on the ray x = t, z = START_Z + ray_z t; the flap's plane: (PANEL_X - x) cos a = sign (hinge_z - z) sin a
+    num = PANEL_X * math.cos(opening) - sign * (hinge_z - START_Z) * math.sin(opening)
+    den = math.cos(opening) - sign * ray[:, 2] * math.sin(opening)
+    t = num / den
+    z = START_Z + ray[:, 2] * t
+    s = np.abs(hinge_z - z) / max(math.cos(opening), 1e-6) if t_a < 1e3 else np.zeros_like(z)
+    on = (np.abs(ray[:, 1] * t) < 0.3) & (s <= radius + 0.05) & (sign * (hinge_z - z) >= 0) & (t > 0)
+    depth = np.where(on, t, 2.5)
+    bar = on & (np.abs(ray[:, 1] * t) < 0.1) & (np.abs(s - radius) < 0.008) & (opening == 0.0)
+    depth = np.where(bar, PANEL_X - 0.04, depth)
+    return depth.reshape(256, 256)
+
+
+@pytest.mark.parametrize("sign, radius", [(1.0, 0.4), (-1.0, 0.6)])
+def test_a_flap_held_without_touch_is_seen_by_the_camera(sign, radius):
+    """A hand that feels nothing records no held path; one look, 8 cm into the pull, shows the
+    front's shift growing down it (a flap hinged at its top) or up it (at its bottom), and the flap
+    is then pulled along its circle to its stop. Without the look it is pulled as a side door is,
+    and the bar twists out of the hand before the flap is half open."""
+    from opend_mj.policy.perception import HandleEstimate
+
+    def pull(config):
+        part = LooseFlap(sign, radius, math.radians(95.0))
+        planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
+        planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
+                                              size=(0.2, 0.016), front_x=PANEL_X - 0.04, panel_x=PANEL_X)
+        planner.state.first = Observation(rgb=None, depth=part.look(), instruction="door", camera_view=_flap_view())
+        quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
+        g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
+        state = PullState(quat0=quat)
+        result = PlanResult(stage_reached="pull", failed_stage=None)
+        planner.pull(part, g, True, state, result)
+        return part.opening / part.travel, result.events
+
+    opened, events = pull(PlannerConfig())
+    seen = [e["flap"] for e in events if "flap" in e]
+    assert seen and seen[0]["hinge"] == ("top" if sign > 0 else "bottom"), events
+    assert opened >= 0.85, events
+    assert pull(PlannerConfig().override({"door.flap_pull": False}))[0] < 0.5
