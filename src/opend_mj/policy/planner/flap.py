@@ -9,8 +9,11 @@ far edge predicts. The front's top and bottom edges come from the depth image
 (:func:`~opend_mj.policy.perception.door_edges`): a handle sits near a front's free edge, its hinge
 at the other one. The front may continue past the flap's own edge (a coplanar front beside it), so
 the edge is only an upper bound on the radius; the held path's own circle sets it within that bound.
-Once seen, the pull follows that circle's opening tangent (the flap's outward normal) and the hand
-pitches with it, so that the grip does not twist off the bar.
+A hand that holds too loosely to record a held path is helped by the camera: one new depth image,
+a few centimetres into the pull, shows the front's shift toward the camera growing down it (a flap
+hinged at its top) or up it (at its bottom). Once seen, the pull follows that circle's opening
+tangent (the flap's outward normal) and the hand pitches with it, so that the grip does not twist
+off the bar.
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ from opend_mj.policy.planner.records import Flap, PlanResult, PullState
 
 class FlapSteering:
     """Flap detection and steering for :class:`~opend_mj.policy.planner.pull.Pulling` (uses the
-    planner's ``config.door``, ``state`` (the handle and the first observation) and ``_yawed``)."""
+    planner's ``config.door``, ``state`` (the handle and the first observation), ``_yawed`` and
+    :meth:`~opend_mj.policy.planner.kind.KindCheck.front_seen`)."""
 
     def _front_edges_z(self, state: PullState):
         """World z of the front's top and bottom edges above and below the handle (cached per pull
