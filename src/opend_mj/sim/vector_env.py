@@ -16,7 +16,9 @@ episode ``gym.make(...).reset(seed=s + i)`` gives); an environment whose episode
 the next ``step`` (autoreset "next step"), which returns its first observation with reward 0.
 Observations and info arrays are fresh copies. Text instructions (``instruction="text"``) cannot
 live in shared memory: use the one-hot code, or ``vectorization_mode="async"``.
-`OpenDVectorEnv.worker_cpu_seconds` reports each worker's CPU time (for benchmarks).
+``gym.make_vec(..., step_in_main=True)`` steps environment 0 in the main process while the workers
+step the others (see `OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
+CPU time (for benchmarks).
 """
 
 from __future__ import annotations
@@ -67,73 +69,89 @@ class _Shared:
         self.arrays.clear()
 
 
-def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
-    """One environment: steps on a command byte, writes its results into row ``index``."""
-    from gymnasium.utils import seeding
+class _Runner:
+    """One environment writing its results into row ``index`` of the shared arrays (in a worker
+    process, or for ``step_in_main`` in the main process)."""
 
-    from opend_mj.sim.envs import OpenDCore, make_config
+    def __init__(self, index: int, kwargs: dict, arrays: dict):
+        from gymnasium.utils import seeding
 
-    shared = _Shared(specs, raw=raw)
-    a = shared.arrays
-    command_fd, answer_fd = commands.fileno(), answers.fileno()
-    try:
-        core = OpenDCore(make_config(**kwargs))
-        rng, _ = seeding.np_random(None)
-        done = True
+        from opend_mj.sim.envs import OpenDCore, make_config
+
+        self._seeding = seeding
+        self.core = OpenDCore(make_config(**kwargs))
+        self.rng, _ = seeding.np_random(None)
+        self.done = True
+        a = arrays
         # this environment's rows of the shared arrays
-        flat, actions = a["flat"][index], a["actions"][index]
-        reward, terminated, truncated = a["reward"][index:index + 1], a["terminated"][index:index + 1], \
-            a["truncated"][index:index + 1]
-        info_floats, info_flags = a["info_floats"][index], a["info_flags"][index]
-        term_floats, term_flags = a["term_floats"][index], a["term_flags"][index]
-        images = {key: a[key][index] for key in ("rgb", "depth") if key in a}
+        self.flat, self.actions = a["flat"][index], a["actions"][index]
+        self.reward, self.terminated = a["reward"][index:index + 1], a["terminated"][index:index + 1]
+        self.truncated = a["truncated"][index:index + 1]
+        self.info_floats, self.info_flags = a["info_floats"][index], a["info_flags"][index]
+        self.term_floats, self.term_flags = a["term_floats"][index], a["term_flags"][index]
+        self.images = {key: a[key][index] for key in ("rgb", "depth") if key in a}
 
-        def write(obs_images: dict, step_reward: float, step_terminated: bool, step_truncated: bool,
-                  info: dict) -> None:
-            np.copyto(flat, core.flat, casting="same_kind")
-            for key, image in obs_images.items():
-                images[key][...] = image
-            reward[0], terminated[0], truncated[0] = step_reward, step_terminated, step_truncated
-            info_floats[:] = [info[k] for k in _INFO_FLOATS]
-            info_flags[:] = [info[k] for k in _INFO_FLAGS]
-            terms = info["reward_terms"]
-            term_floats[:] = [terms[k] for k in _TERM_FLOATS]
-            term_flags[:] = [terms[k] for k in _TERM_FLAGS]
+    def _write(self, images: dict, reward: float, terminated: bool, truncated: bool, info: dict) -> None:
+        np.copyto(self.flat, self.core.flat, casting="same_kind")
+        for key, image in images.items():
+            self.images[key][...] = image
+        self.reward[0], self.terminated[0], self.truncated[0] = reward, terminated, truncated
+        self.info_floats[:] = [info[k] for k in _INFO_FLOATS]
+        self.info_flags[:] = [info[k] for k in _INFO_FLAGS]
+        terms = info["reward_terms"]
+        self.term_floats[:] = [terms[k] for k in _TERM_FLOATS]
+        self.term_flags[:] = [terms[k] for k in _TERM_FLAGS]
 
-        def reset(seed, options) -> bytes:
-            nonlocal rng, done
-            if seed is not None:
-                rng, _ = seeding.np_random(int(seed))
-                episode_seed = int(seed)
-            else:
-                episode_seed = int(rng.integers(2**31 - 1))
-            obs, info = core.reset(episode_seed, options)
-            write({k: obs[k] for k in ("rgb", "depth") if k in obs}, 0.0, False, False, info)
-            done = False
-            return pickle.dumps({k: info[k] for k in _EPISODE_KEYS})
+    def reset(self, seed, options) -> bytes:
+        """Start an episode (seeded, or the next of this environment's seed sequence); returns the
+        pickled episode message."""
+        if seed is not None:
+            self.rng, _ = self._seeding.np_random(int(seed))
+            episode_seed = int(seed)
+        else:
+            episode_seed = int(self.rng.integers(2**31 - 1))
+        obs, info = self.core.reset(episode_seed, options)
+        self._write({k: obs[k] for k in ("rgb", "depth") if k in obs}, 0.0, False, False, info)
+        self.done = False
+        return pickle.dumps({k: info[k] for k in _EPISODE_KEYS})
 
-        def answer(message: bytes | None = None) -> None:
-            if message is None:
-                os.write(answer_fd, _DONE)
-            else:  # the message first: the main process reads it when the answer byte says so
-                control.send_bytes(message)
-                os.write(answer_fd, _MESSAGE)
+    def step(self) -> bytes | None:
+        """Step with the shared actions row (or reset an ended episode); None, or the pickled
+        message (an episode start or physics warnings)."""
+        if self.done:
+            return self.reset(None, None)
+        _, reward, terminated, truncated, info = self.core.step(self.actions, observe=False)
+        self._write(self.core.images(), reward, terminated, truncated, info)
+        self.done = terminated or truncated
+        warnings = info.get("physics_warnings")
+        return pickle.dumps({"physics_warnings": warnings}) if warnings else None
 
+    def close(self) -> None:
+        self.core.close()
+
+
+def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
+    """One environment in a worker process: steps on a command byte, answers with one byte."""
+    shared = _Shared(specs, raw=raw)
+    command_fd, answer_fd = commands.fileno(), answers.fileno()
+    runner = None
+
+    def answer(message: bytes | None = None) -> None:
+        if message is None:
+            os.write(answer_fd, _DONE)
+        else:  # the message first: the main process reads it when the answer byte says so
+            control.send_bytes(message)
+            os.write(answer_fd, _MESSAGE)
+
+    try:
+        runner = _Runner(index, kwargs, shared.arrays)
         answer()  # ready
         while True:
             command = os.read(command_fd, 1)
             if command == _STEP:
-                if done:
-                    answer(reset(None, None))
-                    continue
-                _, step_reward, step_terminated, step_truncated, info = core.step(actions, observe=False)
-                write(core.images(), step_reward, step_terminated, step_truncated, info)
-                done = step_terminated or step_truncated
-                warnings = info.get("physics_warnings")
-                answer(pickle.dumps({"physics_warnings": warnings}) if warnings else None)
+                answer(runner.step())
             elif command == _RESET:
-                seed, options = pickle.loads(control.recv_bytes())
-                answer(reset(seed, options))
+                answer(runner.reset(*pickle.loads(control.recv_bytes())))
             elif command == _CPU:
                 answer(pickle.dumps({"cpu_seconds": time.process_time()}))
             else:  # _CLOSE, or b"" when the main process is gone
@@ -145,8 +163,8 @@ def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers,
         except (BrokenPipeError, OSError):
             pass
     finally:
-        if "core" in locals():
-            core.close()
+        if runner is not None:
+            runner.close()
         shared.close()
         for connection in (commands, answers, control):
             connection.close()
@@ -155,12 +173,17 @@ def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers,
 class OpenDVectorEnv(VectorEnv):
     """``num_envs`` environments over the dataset in worker processes with shared-memory results.
 
-    Keyword arguments: those of ``gym.make("opend/OpenCabinet-v0", ...)`` (`EnvConfig`'s fields).
+    Keyword arguments: those of ``gym.make("opend/OpenCabinet-v0", ...)`` (`EnvConfig`'s fields),
+    and ``step_in_main``: True runs environment 0 in this process, between handing the step to the
+    workers and collecting their answers (``num_envs - 1`` worker processes): the main process
+    steps an environment instead of sleeping, and waits for one fewer answer. Where there are no
+    more free cores than environments (e.g. 2 environments on 2 cores) this is the faster choice;
+    where a learner in the main process needs its core, leave it False.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 2, **kwargs):
+    def __init__(self, num_envs: int = 2, step_in_main: bool = False, **kwargs):
         from opend_mj.sim.envs import OpenDCore, make_config
         from opend_mj.sim.spaces import action_space, observation_space
 
@@ -203,8 +226,11 @@ class OpenDVectorEnv(VectorEnv):
         self._all = np.ones(n, dtype=bool)  # the info masks: every environment reports every key
         self._closed_workers = False
         self._controls, self._processes, self._command_fds, self._answer_fds, self._ends = [], [], [], [], []
+        self._local: _Runner | None = None
+        #: index of the first environment in a worker process (1 when environment 0 steps here)
+        self._offset = 1 if step_in_main else 0
         try:
-            for i in range(n):
+            for i in range(self._offset, n):
                 command_r, command_w = context.Pipe(duplex=False)
                 answer_r, answer_w = context.Pipe(duplex=False)
                 control, child_control = context.Pipe()
@@ -219,27 +245,30 @@ class OpenDVectorEnv(VectorEnv):
                 self._answer_fds.append(answer_r.fileno())
                 self._controls.append(control)
                 self._processes.append(proc)
-            for i in range(n):
-                self._answer(i)
+            if step_in_main:
+                self._local = _Runner(0, dict(kwargs), self._arrays)
+            for j in range(len(self._processes)):
+                self._answer(j)
         except BaseException:
             self.close_extras()
             raise
 
     # ------------------------------------------------------------------ plumbing
-    def _answer(self, i: int) -> bytes | None:
-        """Worker i's answer: None for a plain step, else its message (raises on a worker's error)."""
+    def _answer(self, j: int) -> bytes | None:
+        """Worker j's answer (environment ``j + offset``): None for a plain step, else its message
+        (raises on a worker's error)."""
         try:
-            byte = os.read(self._answer_fds[i], 1)
+            byte = os.read(self._answer_fds[j], 1)
         except OSError:
             byte = b""
         if byte == _DONE:
             return None
         if byte == _MESSAGE:
-            return self._controls[i].recv_bytes()
+            return self._controls[j].recv_bytes()
+        where = f"worker {j} (environment {j + self._offset}) of the vector environment"
         if byte == _ERROR:
-            raise RuntimeError(f"worker {i} of the vector environment failed:\n"
-                               f"{self._controls[i].recv_bytes().decode()}")
-        raise RuntimeError(f"worker {i} of the vector environment died")
+            raise RuntimeError(f"{where} failed:\n{self._controls[j].recv_bytes().decode()}")
+        raise RuntimeError(f"{where} died")
 
     def _apply(self, i: int, message: bytes | None) -> list | None:
         """Apply a worker's message (an episode start or physics warnings); return the warnings."""
@@ -298,11 +327,14 @@ class OpenDVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
-        for i, s in enumerate(seeds):
-            self._controls[i].send_bytes(pickle.dumps((s, options)))
-            os.write(self._command_fds[i], _RESET)
-        for i in range(self.num_envs):
-            self._apply(i, self._answer(i))
+        offset = self._offset
+        for j, s in enumerate(seeds[offset:]):
+            self._controls[j].send_bytes(pickle.dumps((s, options)))
+            os.write(self._command_fds[j], _RESET)
+        if self._local is not None:
+            self._apply(0, self._local.reset(seeds[0], options))
+        for j in range(len(self._processes)):
+            self._apply(j + offset, self._answer(j))
         return self._observations(), self._infos({})
 
     def step(self, actions):
@@ -313,20 +345,25 @@ class OpenDVectorEnv(VectorEnv):
         for fd in self._command_fds:
             os.write(fd, _STEP)
         warnings = {}
-        for i in range(self.num_envs):
-            message = self._answer(i)
+        if self._local is not None:  # environment 0 steps here while the workers step theirs
+            w = self._apply(0, self._local.step())
+            if w:
+                warnings[0] = w
+        for j in range(len(self._processes)):
+            message = self._answer(j)
             if message is not None:
-                w = self._apply(i, message)
+                w = self._apply(j + self._offset, message)
                 if w:
-                    warnings[i] = w
+                    warnings[j + self._offset] = w
         return (self._observations(), a["reward"].copy(), a["terminated"].copy(), a["truncated"].copy(),
                 self._infos(warnings))
 
     def worker_cpu_seconds(self) -> list[float]:
-        """CPU seconds (user + system) each worker process has used so far."""
+        """CPU seconds (user + system) each worker process has used so far (not this process's:
+        with ``step_in_main`` environment 0's steps are in ``time.process_time()`` here)."""
         for fd in self._command_fds:
             os.write(fd, _CPU)
-        return [pickle.loads(self._answer(i))["cpu_seconds"] for i in range(self.num_envs)]
+        return [pickle.loads(self._answer(j))["cpu_seconds"] for j in range(len(self._processes))]
 
     def close_extras(self, **kwargs) -> None:
         if self._closed_workers:
@@ -344,4 +381,7 @@ class OpenDVectorEnv(VectorEnv):
                 proc.terminate()
         for connection in self._ends + self._controls:
             connection.close()
+        if self._local is not None:
+            self._local.close()
+            self._local = None
         self._shared.close()
