@@ -27,6 +27,10 @@ the run, so that no reset falls inside a timed chunk):
   step + the main process's hand-over; with ``step_in_main`` the longer of the main process's
   step-and-hand-over and a worker's step). An estimate from CPU times: wake-up latencies are not
   in it.
+- reference: two processes with an environment each stepping the same chunk at the same time with
+  no hand-over between steps: what two processes give on this machine at this moment (shared
+  caches and memory bandwidth, and other work on the cores, included), the bound for any lock-step
+  vector environment of two processes.
 - RGB-D at each image size: environment steps/s, the scene's own renderer alone (rgb + depth of
   the current state), and the ceiling of physics and rendering alone
   (1 / (1 / control-step ceiling + 1 / render rate)), interleaved in the same way.
@@ -177,6 +181,52 @@ class Vector:
         self.envs.close()
 
 
+def _free_runner(base: dict, steps: int, connection) -> None:
+    """A process with its own environment: runs ``k`` steps when told, answers (wall, CPU) seconds."""
+    single = Single(base, steps)
+    connection.send("ready")
+    while True:
+        k = connection.recv()
+        if k is None:
+            break
+        tally = Tally()
+        single.chunk(single.env, k, tally)
+        connection.send((tally.wall, tally.cpu))
+    single.close()
+
+
+class FreePair:
+    """Two processes with an environment each, stepping a chunk at the same time without any
+    hand-over between steps: the most two processes can give on this machine at this moment (the
+    reference for the vector environments' lock-step scaling)."""
+
+    def __init__(self, base: dict, steps: int):
+        import multiprocessing as mp
+
+        context = mp.get_context("spawn")
+        self.connections, self.processes = [], []
+        for _ in range(2):
+            here, there = context.Pipe()
+            proc = context.Process(target=_free_runner, args=(base, steps, there), daemon=True)
+            proc.start()
+            self.connections.append(here)
+            self.processes.append(proc)
+        for c in self.connections:
+            c.recv()
+
+    def chunk(self, k: int, tally: Tally) -> None:
+        start = time.perf_counter()
+        for c in self.connections:
+            c.send(k)
+        answers = [c.recv() for c in self.connections]
+        tally.add(2 * k, time.perf_counter() - start, 0.0, sum(cpu for _, cpu in answers))
+
+    def close(self) -> None:
+        for c, proc in zip(self.connections, self.processes):
+            c.send(None)
+            proc.join(timeout=10)
+
+
 def state_and_vector(base: dict, steps: int, k: int) -> dict:
     """Interleaved chunks: gym.make env, the unwrapped env, raw mj_step, vector envs (1, 2, async 2)."""
     single = Single(base, 2 * steps + 2 * k)
@@ -186,6 +236,7 @@ def state_and_vector(base: dict, steps: int, k: int) -> dict:
     except TypeError:  # an OpenDVectorEnv without step_in_main (comparing against older code)
         pass
     vectors["async2"] = Vector(base, steps + k, 2, mode="async")
+    vectors["free2"] = FreePair(base, steps + k)
     tallies = {key: Tally() for key in ("env", "unwrapped", "raw", *vectors)}
     try:
         single.chunk(single.env, k, Tally())  # warm-up
@@ -276,6 +327,10 @@ def main() -> None:
     print(_row("Python around the physics per step (CPU time)", f"{(1 / env.cpu_rate - 1 / cpu_ceiling) * us:.0f} us",
                f"physics {us / cpu_ceiling:.0f} us"))
     one_cpu = 1.0 / env.cpu_rate  # CPU seconds per step in one process
+    free = t["free2"]
+    print(_row("reference: 2 independent processes, an environment each, stepping at the same time "
+               "(no hand-over; CPU per step)", f"{free.rate:.0f} ({free.worker_cpu / free.steps * us:.0f} us)",
+               f"{free.rate / env.rate:.2f}x 1 process (CPU per step {free.worker_cpu / free.steps / one_cpu:.2f}x)"))
     for key, label in (("vec1", "vector env, 1 worker process"), ("vec2", "vector env, 2 worker processes"),
                        ("main2", "**vector env, 2 processes: `step_in_main=True` + 1 worker**"),
                        ("async2", "gymnasium AsyncVectorEnv, 2 processes")):
