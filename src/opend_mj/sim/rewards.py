@@ -269,13 +269,16 @@ class RewardProbe:
             else:
                 others.append(t.range_ratio(value))
         open_ratio = target.open_ratio(q)
-        moved = checker.moved_threshold
+        # the largest other range ratio: others moved when it is above the threshold (range ratios
+        # are never NaN: max(0.0, NaN) is 0.0)
+        others_range = max(others, default=0.0)
         if len(geom1):
             hand = self._hand_mask
             contact = bool(np.any((hand[geom1] & handle_mask[geom2]) | (hand[geom2] & handle_mask[geom1])))
         else:
             contact = False
         return RewardTerms(distance=self.distance(box), start_distance=self.start_distance, contact=contact,
-                           open_ratio=float(open_ratio), others_range=max(others, default=0.0),
-                           success=bool(open_ratio > checker.threshold), others_moved=any(r > moved for r in others),
+                           open_ratio=float(open_ratio), others_range=others_range,
+                           success=bool(open_ratio > checker.threshold),
+                           others_moved=bool(others) and others_range > checker.moved_threshold,
                            range_ratio=float(target.range_ratio(q)))
