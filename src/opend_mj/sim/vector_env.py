@@ -14,7 +14,8 @@ and merges it key by key in the main process, which made two processes slower th
 Semantics are gymnasium's defaults: ``reset(seed=s)`` seeds environment i with ``s + i`` (the
 episode ``gym.make(...).reset(seed=s + i)`` gives); an environment whose episode ended is reset on
 the next ``step`` (autoreset "next step"), which returns its first observation with reward 0.
-Observations and info arrays are fresh copies. Text instructions (``instruction="text"``) cannot
+Observations and the step's info arrays are fresh copies; the info's episode columns
+(instruction, cabinet, target, ...) and its masks are read-only arrays shared between steps. Text instructions (``instruction="text"``) cannot
 live in shared memory: use the one-hot code, or ``vectorization_mode="async"``.
 ``gym.make_vec(..., step_in_main=True)`` steps environment 0 in the main process while the workers
 step the others (see `OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
@@ -224,6 +225,7 @@ class OpenDVectorEnv(VectorEnv):
         self._episode = [dict.fromkeys(_EPISODE_KEYS) for _ in range(n)]
         self._episode_columns: dict | None = None
         self._all = np.ones(n, dtype=bool)  # the info masks: every environment reports every key
+        self._all.flags.writeable = False
         self._closed_workers = False
         self._controls, self._processes, self._command_fds, self._answer_fds, self._ends = [], [], [], [], []
         self._local: _Runner | None = None
@@ -296,7 +298,7 @@ class OpenDVectorEnv(VectorEnv):
 
     def _infos(self, warnings: dict[int, list]) -> dict:
         a, n = self._arrays, self.num_envs
-        mask = self._all.copy()
+        mask = self._all  # read-only, the same array every step
         # one copy per shared array, transposed: each key is then a contiguous row of it
         columns = ((a["info_floats"].T.copy(), a["info_flags"].T.copy()),
                    (a["term_floats"].T.copy(), a["term_flags"].T.copy()))
@@ -306,11 +308,14 @@ class OpenDVectorEnv(VectorEnv):
                 out[key], out[mask_key] = (flags if flag else floats)[j], mask
         info["reward_terms"], info["_reward_terms"] = terms, mask
         if self._episode_columns is None:  # an episode started: its strings and integers as columns
-            self._episode_columns = {
-                key: np.array([e[key] for e in self._episode],
-                              dtype=np.int64 if key in ("room", "episode_seed") else object) for key in _EPISODE_KEYS}
+            self._episode_columns = {}
+            for key in _EPISODE_KEYS:
+                column = np.array([e[key] for e in self._episode],
+                                  dtype=np.int64 if key in ("room", "episode_seed") else object)
+                column.flags.writeable = False  # handed out until the next episode starts
+                self._episode_columns[key] = column
         for key, column in self._episode_columns.items():
-            info[key], info["_" + key] = column.copy(), mask
+            info[key], info["_" + key] = column, mask
         if warnings:
             column = np.empty(n, dtype=object)
             for i, w in warnings.items():
