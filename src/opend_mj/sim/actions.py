@@ -71,7 +71,7 @@ class ActionAdapter:
             raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
         a = np.minimum(np.maximum(a, self._unit_low), self._unit_high)
         values = a.tolist()
-        px, py, pz = mocap_pos.tolist()
+        px, py, pz = np.asarray(mocap_pos, float).tolist()
         sp, sr = self.step_pos, self.step_rot
         ax, ay, az = values[3] * sr, values[4] * sr, values[5] * sr
         rotvec = np.array((ax, ay, az))
@@ -87,10 +87,12 @@ class ActionAdapter:
             quat = np.array((w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
                              w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2))
             quat /= math.sqrt(quat.dot(quat))
-            head = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp, *quat.tolist()]
+            quat = quat.tolist()
         else:
-            head = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp, *np.asarray(mocap_quat).tolist()]
-        fingers = [lo + (u + 1.0) * 0.5 * span for lo, u, span in zip(self._finger_low_list, values[6:], self._span_list)]
+            quat = np.asarray(mocap_quat, float).tolist()
+        head = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp, *quat]
+        fingers = [lo + (u + 1.0) * 0.5 * span
+                   for lo, u, span in zip(self._finger_low_list, values[6:], self._span_list)]
         return np.array(head + fingers)
 
     def from_delta_reference(self, action, mocap_pos, mocap_quat) -> np.ndarray:

@@ -84,15 +84,24 @@ class SceneReader:
         self._views = None
 
     def _bind_views(self, out: np.ndarray) -> tuple:
-        """(out, [(destination, source)] of the plain copies `fill` makes): views of ``out``'s
-        slices and of the MjData rows they copy (one MjData per scene, so the rows stay valid)."""
+        """(out, [(destination, source)] of the plain copies `fill` makes, [(destination, source,
+        indices)] of its gathers, ...): views of ``out``'s slices and of the MjData rows they copy
+        (one MjData per scene, so the rows stay valid). The finger joints' qpos and qvel addresses
+        are usually one run each: then they are plain copies too."""
         d, s = self._data, self._slices
         sources = {"root_pos": d.xpos[self._root], "root_quat": d.xquat[self._root],
                    "root_vel": d.qvel[self._free_dof:self._free_dof + 6], "grasp_site_pos": d.site_xpos[self._site],
                    "mocap_pos": d.mocap_pos[self._mocap], "mocap_quat": d.mocap_quat[self._mocap]}
+        gathers = []  # (destination, source array, indices) where the indices are not one run
+        for key, source, index in (("hand_qpos", d.qpos, self._qpos), ("hand_qvel", d.qvel, self._qvel)):
+            first = int(index[0]) if len(index) else 0
+            if np.array_equal(index, np.arange(first, first + len(index))):
+                sources[key] = source[first:first + len(index)]  # a run of addresses: a plain copy
+            else:
+                gathers.append((out[s[key]], source, index))
         copies = [(out[s[key]], source) for key, source in sources.items()]
-        keys = ("hand_qpos", "hand_qvel", "grasp_site_quat", "touch", "time")
-        self._views = (out, copies, *(out[s[key]] for key in keys), d.site_xmat[self._site])
+        keys = ("grasp_site_quat", "touch", "time")
+        self._views = (out, copies, gathers, *(out[s[key]] for key in keys), d.site_xmat[self._site])
         return self._views
 
     def fill(self, out: np.ndarray, privileged: bool = False):
@@ -105,11 +114,11 @@ class SceneReader:
         views = self._views
         if views is None or views[0] is not out:
             views = self._bind_views(out)
-        _, copies, hand_qpos, hand_qvel, site_quat, touch, time, site_xmat = views
-        np.take(d.qpos, self._qpos, out=hand_qpos)
-        np.take(d.qvel, self._qvel, out=hand_qvel)
+        _, copies, gathers, site_quat, touch, time, site_xmat = views
         for destination, source in copies:
-            destination[:] = source
+            destination[...] = source
+        for destination, source, index in gathers:
+            np.take(source, index, out=destination)
         site_quat[:] = mat9_to_quat(site_xmat)
         contact = d.contact  # one read of the contact list for touch and the reward's contact term
         touch[:] = self._touch.vector_from(contact)

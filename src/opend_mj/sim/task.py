@@ -295,8 +295,9 @@ class OpenCabinetTask(composer.Task):
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
         composer's per-substep Python hooks; once the mocap has reached its target pose (at once
         when it does not move) the remaining substeps are one ``mj_step(model, data, n)`` call.
-        Afterwards the kinematics (bodies, sites, geoms, cameras, lights) are brought up to date with the new state, so that readers see where things are;
-        this does not change the trajectory (each ``mj_step`` recomputes them first). With
+        Afterwards the kinematics (bodies, sites, geoms, cameras, lights) are brought up to date
+        with the new state, so that readers see where things are; this does not change the
+        trajectory (each ``mj_step`` recomputes them first). With
         ``cameras=False`` only body, geom and site poses are brought up to date (``mj_kinematics``),
         not centre-of-mass quantities, cameras or lights: for readers that render nothing and read
         no camera (the state-only environments). Returns the names of MuJoCo instability warnings
@@ -315,7 +316,7 @@ class OpenCabinetTask(composer.Task):
                 if path_quat is not None:
                     mocap_quat[...] = path_quat[i]
                 _mujoco.mj_step(model, data)
-        if writes < self._substeps:  # the mocap pose no longer changes: one call (mj_step leaves it alone)
+        if writes < self._substeps:  # the mocap pose no longer changes (mj_step leaves it alone): one call
             _mujoco.mj_step(model, data, self._substeps - writes)
         _mujoco.mj_kinematics(model, data)
         if cameras:
@@ -351,11 +352,11 @@ class OpenCabinetTask(composer.Task):
                                      for a in self.hand.actuators])
         ranges = physics.model.actuator_ctrlrange[self._ctrl_index]
         self._ctrl_range = (ranges[:, 0], ranges[:, 1])
-        # views of the rows every control step writes (this MjData's, refreshed at each episode);
-        #: (mocap position, mocap quaternion): views of the mocap body's rows of MjData
+        # views of the rows every control step writes (this MjData's, refreshed at each episode)
         data, first = self._data, int(self._ctrl_index[0])
         contiguous = np.array_equal(self._ctrl_index, np.arange(first, first + len(self._ctrl_index)))
         self._ctrl_view = data.ctrl[first:first + len(self._ctrl_index)] if contiguous else None
+        #: (mocap position, mocap quaternion): views of the mocap body's rows of MjData
         self.mocap_views = (data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id])
         self._model = physics.model.ptr
 

@@ -9,14 +9,16 @@ answer pipe (plain ``os.write`` / ``os.read`` of a byte: no message framing, no 
 object per step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
 physics warning and on an error does the answer byte say that a pickled message waits on the
 worker's control connection. gymnasium's ``AsyncVectorEnv`` instead pickles every step's info dict
-and merges it key by key in the main process, which made two processes slower than one.
+and merges it key by key in the main process (about four times the main process's CPU per step).
 
 Semantics are gymnasium's defaults: ``reset(seed=s)`` seeds environment i with ``s + i`` (the
 episode ``gym.make(...).reset(seed=s + i)`` gives); an environment whose episode ended is reset on
 the next ``step`` (autoreset "next step"), which returns its first observation with reward 0.
 Observations and the step's info arrays are fresh copies; the info's episode columns
-(instruction, cabinet, target, ...) and its masks are read-only arrays shared between steps. Text instructions (``instruction="text"``) cannot
-live in shared memory: use the one-hot code, or ``vectorization_mode="async"``.
+(instruction, cabinet, target, ...) and its masks are read-only arrays shared between steps. Text
+instructions (``instruction="text"``) cannot live in shared memory: use the one-hot code, or
+``vectorization_mode="async"``.
+
 ``gym.make_vec(..., step_in_main=True)`` steps environment 0 in the main process while the workers
 step the others (see `OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
 CPU time (for benchmarks).
