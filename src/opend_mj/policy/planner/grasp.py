@@ -18,7 +18,7 @@ from opend_mj.policy.perception import door_edges, infer_hinge_side
 from opend_mj.policy.planner.clearance import clearances, outline_for
 from opend_mj.policy.planner.records import GraspChoice, Observation, PlanResult, PullState
 from opend_mj.sim.hands import orientation_for_handle
-from opend_mj.transforms import axis_angle_quat, quat_axis_z, quat_mul, yaw_quat
+from opend_mj.transforms import axis_angle_quat, quat_axis_z, quat_mul, quat_to_mat, yaw_quat
 
 class _Events:
     """Where a pose's events go: a PlanResult's list, or a list that is dropped."""
@@ -60,14 +60,21 @@ class GraspGeometry:
         clear = self.clears(handle, shape, quat, pos, pre)
         if clear is not None and not clear[0] and handle.kind == "knob" and self.hand.clearance_knob_turn:
             other = "vertical" if orientation == "horizontal" else "horizontal"
-            turned = self._pose(other, handle, shape, door, side, centre, [])
-            turned_clear = self.clears(handle, shape, turned[0], turned[1], turned[2])
-            if min(turned_clear[1:]) > min(clear[1:]):  # a knob is round: turned a quarter, it holds it as well
-                result.events.append({"knob_turned": [other, *clear[1:], *turned_clear[1:]]})
-                orientation, (quat, pos, pre, level) = other, turned
-                clear = turned_clear
+            q, p, f, lv = self._pose(other, handle, shape, door, side, centre, [])
+            # the fingers either way round (a knob has no side to favour); the first on a tie
+            options = [(q, p, f, lv), (quat_mul(q, yaw_quat(math.pi)), p, f, quat_mul(lv, yaw_quat(math.pi)))]
+            rooms = [self.clears(handle, shape, *o[:3]) for o in options]
+            best = max(range(2), key=lambda i: (min(rooms[i][1:]), -i))
+            if min(rooms[best][1:]) > min(clear[1:]):  # a knob is round: turned a quarter, it holds it as well
+                result.events.append({"knob_turned": [other, *clear[1:], *rooms[best][1:]]})
+                orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
         if clear is not None and not clear[0] and orientation == "horizontal":
             quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
+        if style == "hook" and self.hand.hook_slide:
+            # the bar at the fingers' middle segments, where their curl closes behind it (not at the
+            # proximal ones, whose tips would curl past the bar onto the panel)
+            pos = pos - self.hand.hook_slide * quat_to_mat(quat)[:, 1]
+            result.events.append({"hook_slide": self.hand.hook_slide})
         grasp = GraspChoice(style, orientation, quat, pos, pre, self.closed_profile(orientation))
         self.state.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})

@@ -82,7 +82,12 @@ class HandPlannerConfig:
     hand turned a quarter about the approach axis (the other finger orientation) where that pose
     keeps more room to the floor and the panel (the smaller of the two); ``clearance_pitches`` (deg, tried in order): a horizontal handle is approached pitched
     down by the first of these (90 = straight down) at which the hand clears, a gripper's fingers
-    opened as little as the bar's half thickness plus ``clearance_bar_margin`` (m)."""
+    opened as little as the bar's half thickness plus ``clearance_bar_margin`` (m).
+
+    ``hook_slide`` (m): a hooked bar is grasped this far out along the fingers from the grasp site
+    (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
+    segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
+    to its door is passed over by the curl, whose tips then press on the panel."""
 
     low_handle_lift: float = 0.0
     min_grasp_height: float | None = None
@@ -94,6 +99,7 @@ class HandPlannerConfig:
     clearance_knob_turn: bool = False
     clearance_pitches: tuple = ()
     clearance_bar_margin: float = 0.004
+    hook_slide: float = 0.0
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
