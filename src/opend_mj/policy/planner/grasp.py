@@ -72,9 +72,14 @@ class GraspGeometry:
             quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
         if style == "hook" and self.hand.hook_slide:
             # the bar at the fingers' middle segments, where their curl closes behind it (not at the
-            # proximal ones, whose tips would curl past the bar onto the panel)
-            pos = pos - self.hand.hook_slide * quat_to_mat(quat)[:, 1]
-            result.events.append({"hook_slide": self.hand.hook_slide})
+            # proximal ones, whose tips would curl past the bar onto the panel); a site already
+            # moved back along the fingers (a low handle's lift) moves only the rest of the way
+            fingers = quat_to_mat(quat)[:, 1]
+            along = float((pos - centre) @ fingers)
+            slide = max(0.0, along + self.hand.hook_slide)
+            if slide > 0.0:
+                pos = pos - slide * fingers
+                result.events.append({"hook_slide": round(slide, 4)})
         grasp = GraspChoice(style, orientation, quat, pos, pre, self.closed_profile(orientation))
         self.state.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
