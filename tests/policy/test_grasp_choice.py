@@ -250,11 +250,14 @@ def test_the_gripper_has_no_room_at_a_bar_near_the_floor_and_its_door():
     """A 14 mm bar 4 cm above the floor, 16 mm off its door: the gripper pitched down 35 degrees (its
     low-handle pose) reaches into the floor and the door, and no pitch from 35 to 90 degrees clears
     both (its 20 cm body across the bar); the same bar 30 cm up clears level."""
+    from opend_mj.transforms import quat_to_mat
+
     bar, posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.04)
     pitches = (35.0, 45.0, 55.0, 65.0, 75.0, 90.0)
-    handle, shape, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", clearance_pitches=pitches)
+    handle, _, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", clearance_pitches=pitches)
     assert handle.centre[2] < 0.05
-    events = []
+    # nothing clears: the pose stays the hand's low-handle pose (pitched 35 degrees down)
+    assert quat_to_mat(grasp.quat)[2, 2] == pytest.approx(-np.sin(np.radians(35.0)), abs=1e-6)
     planner_events = _choose_events("franka", [bar, *posts], bar, clearance_pitches=pitches)
     assert any("no_clear_pose" in e for e in planner_events), planner_events
     floor, door = next(e["no_clear_pose"] for e in planner_events if "no_clear_pose" in e)
@@ -309,3 +312,23 @@ def test_a_knob_near_the_floor_is_grasped_with_the_hand_turned(hand):
     # a hand that does not check (clearance_margin null) keeps its orientation near the floor too
     _, _, grasp = _choose(hand, [low], low, "door", kind="door", clearance_margin=None)
     assert grasp.orientation == "horizontal"
+
+
+def test_the_pitch_search_takes_the_first_pitch_that_clears():
+    """A 10 mm bar 7 cm above the floor with 45 mm behind it, the gripper's fixed low-handle pitch
+    off: level, its body reaches into the floor; of 10, 35 and 60 degrees, 10 does not clear, 35
+    does (both clearances at least the margin), and the grasp is approached pitched by it."""
+    from opend_mj.policy.planner.clearance import clearances, outline_for
+    from opend_mj.sim.hands import load_spec
+    from opend_mj.transforms import quat_to_mat
+
+    bar, posts = _bar(thickness=0.01, gap=0.045, length=0.2, z=0.07)
+    numbers = dict(low_handle_pitch=0.0, clearance_pitches=(10.0, 35.0, 60.0))
+    handle, shape, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", **numbers)
+    events = _choose_events("franka", [bar, *posts], bar, **numbers)
+    pitch = next(e["clearance_pitch"] for e in events if "clearance_pitch" in e)
+    assert pitch[0] == 35.0 and min(pitch[1:]) >= 0.003
+    assert quat_to_mat(grasp.quat)[2, 2] == pytest.approx(-np.sin(np.radians(35.0)), abs=1e-6)
+    floor, door = clearances(outline_for(load_spec("franka"), grasp.pre), grasp.pos, grasp.quat,
+                             handle.front_x + shape.protrusion)
+    assert floor >= 0.003 and door >= 0.003
