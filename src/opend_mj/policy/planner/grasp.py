@@ -77,6 +77,12 @@ class GraspGeometry:
             fingers = quat_to_mat(quat)[:, 1]
             along = float((pos - centre) @ fingers)
             slide = max(0.0, along + self.hand.hook_slide)
+            side = self._side_toward(-fingers)
+            if side in ("left", "right") and shape.clear[side] < cfg.neighbour_clear:
+                # not toward a neighbour beside a vertical bar (a double door's other handle 5-8 cm
+                # away): the hand would push that door
+                result.events.append({"hook_slide_blocked": [side, shape.clear[side]]})
+                slide = 0.0
             if slide > 0.0:
                 pos = pos - slide * fingers
                 result.events.append({"hook_slide": round(slide, 4)})
@@ -84,6 +90,15 @@ class GraspGeometry:
         self.state.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
+
+    @staticmethod
+    def _side_toward(direction) -> str:
+        """The side of the handle ("left" = +y, "right" = -y, "up", "down") a world direction mostly
+        points to (the sides of the handle's measured ``clear`` space)."""
+        d = np.asarray(direction, float)
+        if abs(d[1]) >= abs(d[2]):
+            return "left" if d[1] > 0 else "right"
+        return "up" if d[2] > 0 else "down"
 
     def _pose(self, orientation: str, handle, shape, door: bool, side, centre, events: list):
         """The grasp-site orientation and position and the open fingers for a handle grasped in
