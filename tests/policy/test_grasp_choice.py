@@ -98,9 +98,7 @@ def test_thin_bar_close_to_the_panel_is_pinched(hand):
 def test_wide_bar_with_room_behind_is_hooked(hand):
     bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
     # the synthetic scene sits at z = 0: not a handle near the floor
-    # (and no hook slide: the site at the bar; test_thin_door_bars checks the slide)
-    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift=0.0, min_grasp_height=None,
-                                   hook_slide=0.0)
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift=0.0, min_grasp_height=None)
     assert handle.kind == "bar"
     assert shape.thickness == pytest.approx(0.014, abs=0.005)
     assert shape.gap == pytest.approx(0.03, abs=0.008)

@@ -223,16 +223,12 @@ def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
 
 @pytest.mark.slow
 def test_regrasp_after_a_deliberate_miss_opens_the_drawer(planner_cabinets):
-    """The first grasp's fingers close 6 cm above the handle (on air): the touch sensors say nothing is
-    held, the hand backs off, grasps again at the handle it saw, and opens the drawer. (The miss adds
-    the hand's hook slide: its hook grasp site already lies that far below a bar, fingers up.)"""
+    """The first grasp closes 6 cm above the handle (on air): the touch sensors say nothing is held,
+    the hand backs off, grasps again at the handle it saw, and opens the drawer."""
     from opend_mj.evaluation.runner import run_episode
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
 
-    miss = 0.06 + HandPlannerConfig.for_hand(load_spec("allegro")).hook_slide
     rec = run_episode(_job(planner_cabinets, DRAWER, "allegro",
-                           planner_overrides=(("approach.first_grasp_offset", (0.0, 0.0, miss)),)))
+                           planner_overrides=(("approach.first_grasp_offset", (0.0, 0.0, 0.06)),)))
     assert "error" not in rec, rec.get("error")
     assert rec["regrasps"] >= 1
     assert rec["verify"][0]["held"] is False and any(v["held"] for v in rec["verify"][1:])

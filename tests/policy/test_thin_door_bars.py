@@ -71,3 +71,14 @@ def test_the_allegro_hooks_a_bar_at_its_fingers_middle_segments():
     _, _, plain = helpers._choose("allegro", [bar, *posts], bar, "door", kind="door", hook_slide=0.0)
     assert float((plain.pos - handle.centre) @ fingers) == pytest.approx(0.0, abs=1e-6)
     assert np.allclose(plain.pos - grasp.pos, slide * fingers)
+    # a drawer's bar (pulled straight) is hooked at the site
+    _, _, drawer = helpers._choose("allegro", [bar, *posts], bar, "top drawer", kind="drawer")
+    assert float((drawer.pos - handle.centre) @ fingers) == pytest.approx(0.0, abs=1e-6)
+    # nor toward a neighbour beside a vertical bar (a double door's other handle 6 cm away)
+    vbar, vposts = helpers._bar(thickness=0.008, gap=0.02, length=0.2, y=0.03, z=0.4, orientation="vertical")
+    other, oposts = helpers._bar(thickness=0.008, gap=0.02, length=0.2, y=-0.038, z=0.4, orientation="vertical")
+    handle, shape, near = helpers._choose("allegro", [vbar, *vposts, other, *oposts], vbar, "top left door",
+                                          kind="door")
+    # fingers toward the left door's hinge (+y): the slide would move the hand right, to the neighbour
+    assert quat_to_mat(near.quat)[1, 1] > 0.99 and shape.clear["right"] < 0.1
+    assert np.allclose(near.pos[1:], handle.centre[1:], atol=1e-6)

@@ -70,9 +70,10 @@ class GraspGeometry:
                 orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
         if clear is not None and not clear[0] and orientation == "horizontal":
             quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
-        if style == "hook" and self.hand.hook_slide:
-            # the bar at the fingers' middle segments, where their curl closes behind it (not at the
-            # proximal ones, whose tips would curl past the bar onto the panel); a site already
+        if style == "hook" and door and self.hand.hook_slide:
+            # a door's bar at the fingers' middle segments, where their curl closes behind it (at the
+            # proximal ones the tips curl past a thin bar onto the panel, and the bar slips out as the
+            # door turns; a drawer's straight pull holds a bar anywhere in the curl); a site already
             # moved back along the fingers (a low handle's lift) moves only the rest of the way
             fingers = quat_to_mat(quat)[:, 1]
             along = float((pos - centre) @ fingers)

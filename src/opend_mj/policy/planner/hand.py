@@ -84,10 +84,11 @@ class HandPlannerConfig:
     down by the first of these (90 = straight down) at which the hand clears, a gripper's fingers
     opened as little as the bar's half thickness plus ``clearance_bar_margin`` (m).
 
-    ``hook_slide`` (m): a hooked bar is grasped this far out along the fingers from the grasp site
+    ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
     segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
-    to its door is passed over by the curl, whose tips then press on the panel."""
+    to its door is passed over by the curl, whose tips then press on the panel. No slide toward a
+    neighbour seen beside the bar (``GraspConfig.neighbour_clear``)."""
 
     low_handle_lift: float = 0.0
     min_grasp_height: float | None = None
