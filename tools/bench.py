@@ -10,6 +10,7 @@ Sections (each a subprocess, so that its peak memory can be read):
             at three physics timesteps; handle solver inference ms per image
   envs    - tools/bench_env.py: raw mj_step ceiling, state steps/s and their ratio to it, the
             shared-memory vector env with 1 and 2 processes, RGB-D at 128 and 256 against the renderer
+            (interleaved chunks, wall and CPU time)
 
     python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs] [--out BENCHMARKS.md]
 """

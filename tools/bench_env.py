@@ -1,32 +1,45 @@
 """Environment steps per second against what MuJoCo itself allows, in one run (`make bench-env`).
 
-    python tools/bench_env.py [--cabinets cabinets] [--hand allegro] [--steps 1500] [--image-steps 300]
+    python tools/bench_env.py [--cabinets cabinets] [--hand allegro] [--steps 1500] [--chunk 50]
+                              [--image-steps 300] [--sizes 128,256]
 
-Figures (`opend/OpenCabinet-v0`, random delta actions drawn before timing, so the policy's cost is
-not counted; single environments time ``step`` alone and reset an ended episode outside the timing,
-vector environments time everything, their autoresets included):
+Made for a shared machine: every figure that is compared with another is measured in interleaved
+chunks of ``--chunk`` steps in one run (a chunk of each contestant in turn, round after round), so
+that all of them see the same load, and each is given both in wall-clock time and in CPU time
+(``time.process_time`` of the process; the vector environments' workers report theirs), which
+waiting for a core does not inflate. The load average is printed before and after.
 
-- raw mj_step: ``mj_step(model, data, n)`` on the environment's own compiled model (the hand at its
-  start pose, in free air), one C call; / substeps per control step = the ceiling in control steps/s.
-- state: the environment's steps/s (1 process) and their ratio to the ceiling. Raw and environment
-  runs alternate three times (median of each), so that both see about the same machine load.
+Figures (`opend/OpenCabinet-v0`, random delta actions drawn before timing; a time limit longer than
+the run, so that no reset falls inside a timed chunk):
+
+- raw mj_step: ``mj_step(model, data, n)`` in one C call on a copy of the environment's own MjData
+  as it is at that chunk (the same model and scene, hand where the environment left it, controls
+  held); / substeps per control step = the ceiling in control steps/s.
+- state: ``env.step`` of ``gym.make(...)`` (with gymnasium's order-enforcing and passive-checker
+  wrappers) and of ``env.unwrapped``, in one process; their ratio to the ceiling.
 - vector: `OpenDVectorEnv` (``gym.make_vec``'s default for these ids: shared memory) with 1 and 2
-  worker processes, and gymnasium's ``AsyncVectorEnv`` with 2 (pickled dict observations and info)
-  for comparison; the ratio is 2 processes against the single in-process environment.
-- RGB-D at each image size: environment steps/s, the renderer's own rate (``RGBDCamera.render``:
-  rgb + depth of one scene update), and the ceiling of physics and rendering alone
-  (1 / (1 / control-step ceiling + 1 / render rate)).
-
-The machine's load average is printed first: on a shared machine every figure moves with it, and
-only ratios measured in the same run compare. The state figures are also given in CPU time of the
-process (``time.process_time``), which waiting for a core does not inflate.
+  worker processes, with 2 environments in 2 processes (``step_in_main=True``: environment 0 in the
+  main process, 1 worker), and gymnasium's ``AsyncVectorEnv`` with 2 (pickled dict observations
+  and info). Wall: steps of all environments per second; CPU: the main process's CPU per vector
+  step, a worker's CPU per step of its environment, steps per CPU second of all processes
+  together, and the speed-up over one process that 2 environments would give if every process had
+  a core of its own: 2 x (CPU per step in one process) / (the lock-step critical path: a worker's
+  step + the main process's hand-over; with ``step_in_main`` the longer of the main process's
+  step-and-hand-over and a worker's step). An estimate from CPU times: wake-up latencies are not
+  in it.
+- reference: two processes with an environment each stepping the same chunk at the same time with
+  no hand-over between steps: what two processes give on this machine at this moment (shared
+  caches and memory bandwidth, and other work on the cores, included), the bound for any lock-step
+  vector environment of two processes.
+- RGB-D at each image size: environment steps/s, the scene's own renderer alone (rgb + depth of
+  the current state), and the ceiling of physics and rendering alone
+  (1 / (1 / control-step ceiling + 1 / render rate)), interleaved in the same way.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -38,96 +51,226 @@ import numpy as np  # noqa: E402
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
 
 ENV_ID = "opend/OpenCabinet-v0"
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
-def _actions(space, steps: int, seed: int = 0) -> list[np.ndarray]:
-    space.seed(seed)
-    return [space.sample() for _ in range(steps)]
+class Tally:
+    """Steps, wall seconds and CPU seconds (this process / worker processes) of one contestant."""
+
+    def __init__(self):
+        self.steps = 0
+        self.wall = self.cpu = self.worker_cpu = 0.0
+
+    def add(self, steps: int, wall: float, cpu: float, worker_cpu: float = 0.0) -> None:
+        self.steps += steps
+        self.wall += wall
+        self.cpu += cpu
+        self.worker_cpu += worker_cpu
+
+    @property
+    def rate(self) -> float:
+        return self.steps / self.wall
+
+    @property
+    def cpu_rate(self) -> float:
+        return self.steps / self.cpu
 
 
-def _run_env(env, actions, clock=time.perf_counter) -> tuple[float, int]:
-    """Steps/s of ``env.step`` alone (an ended episode is reset outside the timing: a reset that
-    compiles a new scene takes about a second, which would swamp a few hundred steps)."""
-    resets, seconds = 0, 0.0
-    for a in actions:
-        start = clock()
-        _, _, terminated, truncated, _ = env.step(a)
-        seconds += clock() - start
-        if terminated or truncated:
-            env.reset()
-            resets += 1
-    return len(actions) / seconds, resets
+def _timed(fn) -> tuple[float, float]:
+    wall, cpu = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - wall, time.process_time() - cpu
 
 
-def _raw_rate(env, n: int, clock=time.perf_counter) -> float:
-    """mj_step/s on a copy of the environment's current MjData (its own model)."""
-    physics = env.unwrapped.core.scene.physics
-    model = physics.model.ptr
-    data = mujoco.MjData(model)
-    mujoco.mj_copyData(data, model, physics.data.ptr)
-    start = clock()
-    mujoco.mj_step(model, data, n)
-    return n / (clock() - start)
-
-
-def state_figures(base: dict, steps: int) -> dict:
-    env = gym.make(ENV_ID, obs_mode="state", **base)
-    env.reset(seed=0)
-    substeps = env.unwrapped.core.scene.task._substeps
-    actions = _actions(env.action_space, steps)
-    _run_env(env, actions[:100])  # warm-up
-    raw, rates, resets, cpu_raw, cpu_rates = [], [], 0, [], []
-    for _ in range(3):
-        raw.append(_raw_rate(env, steps * substeps // 3))
-        cpu_raw.append(_raw_rate(env, steps * substeps // 3, time.process_time))
-        rate, r = _run_env(env, actions)
-        rates.append(rate)
-        cpu_rates.append(_run_env(env, actions, time.process_time)[0])
-        resets += r
-    raw.append(_raw_rate(env, steps * substeps // 3))
-    env.close()
-    raw_rate, cpu_raw_rate = statistics.median(raw), statistics.median(cpu_raw)
-    return {"raw_mj_step": raw_rate, "substeps": substeps, "ceiling": raw_rate / substeps,
-            "state": statistics.median(rates), "resets": resets,
-            "cpu_ceiling": cpu_raw_rate / substeps, "cpu_state": statistics.median(cpu_rates)}
-
-
-def vector_rate(base: dict, steps: int, n: int, mode: str | None = None) -> tuple[float, float]:
-    """(steps of all environments per second, the main process's CPU seconds per vector step)."""
-    kwargs = {"vectorization_mode": mode, "vector_kwargs": {"context": "spawn"}} if mode else {}
-    envs = gym.make_vec(ENV_ID, num_envs=n, obs_mode="state", **kwargs, **base)
+def _proc_cpu(pids) -> float | None:
+    """CPU seconds (user + system) of processes from /proc (Linux; None elsewhere)."""
     try:
-        envs.reset(seed=list(range(n)))
-        actions = _actions(envs.action_space, steps)
-        for a in actions[:50]:
-            envs.step(a)
-        start, cpu = time.perf_counter(), time.process_time()
-        for a in actions:
-            envs.step(a)
-        wall, cpu = time.perf_counter() - start, time.process_time() - cpu
-        return n * steps / wall, cpu / steps
-    finally:
-        envs.close()
+        total = 0
+        for pid in pids:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += int(fields[11]) + int(fields[12])
+        return total / _CLOCK_TICKS
+    except OSError:
+        return None
 
 
-def image_figures(base: dict, steps: int, size: int) -> dict:
-    from opend_mj.sim.camera import RGBDCamera
+class Single:
+    """One environment in this process: env steps (wrapped and unwrapped) and raw mj_step chunks."""
 
-    env = gym.make(ENV_ID, obs_mode="rgbd", image_size=size, **base)
-    env.reset(seed=0)
-    actions = _actions(env.action_space, steps)
-    _run_env(env, actions[:20])
-    rate, _ = _run_env(env, actions)
-    physics = env.unwrapped.core.scene.physics
-    env.unwrapped.core.scene.close()  # one renderer per process: measure the camera alone
-    with RGBDCamera(physics, "front", size, size) as cam:
-        cam.render()
+    def __init__(self, base: dict, steps: int, obs_mode: str = "state", size: int = 256):
+        self.env = gym.make(ENV_ID, obs_mode=obs_mode, image_size=size, **base)
+        self.env.reset(seed=0)
+        self.substeps = self.env.unwrapped.core.scene.task._substeps
+        self.env.action_space.seed(0)
+        self.actions = [self.env.action_space.sample() for _ in range(steps)]
+        self.at = 0
+        self.ended = 0
+
+    def chunk(self, env, k: int, tally: Tally) -> None:
+        actions = self.actions[self.at:self.at + k]
+        self.at += k
+        out = []
+
+        def run():
+            for a in actions:
+                out.append(env.step(a))
+
+        wall, cpu = _timed(run)
+        tally.add(len(actions), wall, cpu)
+        if any(o[2] or o[3] for o in out):  # an episode ended (should not within the time limit)
+            self.ended += 1
+            self.env.reset()
+
+    def raw_chunk(self, k: int, tally: Tally) -> None:
+        physics = self.env.unwrapped.core.scene.physics
+        model = physics.model.ptr
+        data = mujoco.MjData(model)
+        mujoco.mj_copyData(data, model, physics.data.ptr)
+        wall, cpu = _timed(lambda: mujoco.mj_step(model, data, k * self.substeps))
+        tally.add(k, wall, cpu)  # counted in control steps
+
+    def render_chunk(self, k: int, tally: Tally) -> None:
+        scene = self.env.unwrapped.core.scene
+
+        def run():
+            for _ in range(k):
+                scene.render()
+
+        wall, cpu = _timed(run)
+        tally.add(k, wall, cpu)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+class Vector:
+    """A vector environment stepped in chunks, with its workers' CPU time."""
+
+    def __init__(self, base: dict, steps: int, n: int, mode: str | None = None, **extra):
+        kwargs = {"vectorization_mode": mode, "vector_kwargs": {"context": "spawn"}} if mode else extra
+        self.envs = gym.make_vec(ENV_ID, num_envs=n, obs_mode="state", **kwargs, **base)
+        self.n = n
+        self.envs.reset(seed=list(range(n)))
+        self.envs.action_space.seed(0)
+        self.actions = [self.envs.action_space.sample() for _ in range(steps)]
+        self.at = 0
+
+    def worker_cpu(self) -> float | None:
+        envs = self.envs.unwrapped
+        if hasattr(envs, "worker_cpu_seconds"):
+            return sum(envs.worker_cpu_seconds())
+        processes = getattr(envs, "processes", None) or getattr(envs, "_processes", [])
+        return _proc_cpu([p.pid for p in processes])
+
+    def chunk(self, k: int, tally: Tally) -> None:
+        actions = self.actions[self.at:self.at + k]
+        self.at += k
+        before = self.worker_cpu()
+
+        def run():
+            for a in actions:
+                self.envs.step(a)
+
+        wall, cpu = _timed(run)
+        after = self.worker_cpu()
+        worker = after - before if before is not None and after is not None else float("nan")
+        tally.add(len(actions) * self.n, wall, cpu, worker)
+
+    def close(self) -> None:
+        self.envs.close()
+
+
+def _free_runner(base: dict, steps: int, connection) -> None:
+    """A process with its own environment: runs ``k`` steps when told, answers (wall, CPU) seconds."""
+    single = Single(base, steps)
+    connection.send("ready")
+    while True:
+        k = connection.recv()
+        if k is None:
+            break
+        tally = Tally()
+        single.chunk(single.env, k, tally)
+        connection.send((tally.wall, tally.cpu))
+    single.close()
+
+
+class FreePair:
+    """Two processes with an environment each, stepping a chunk at the same time without any
+    hand-over between steps: the most two processes can give on this machine at this moment (the
+    reference for the vector environments' lock-step scaling)."""
+
+    def __init__(self, base: dict, steps: int):
+        import multiprocessing as mp
+
+        context = mp.get_context("spawn")
+        self.connections, self.processes = [], []
+        for _ in range(2):
+            here, there = context.Pipe()
+            proc = context.Process(target=_free_runner, args=(base, steps, there), daemon=True)
+            proc.start()
+            self.connections.append(here)
+            self.processes.append(proc)
+        for c in self.connections:
+            c.recv()
+
+    def chunk(self, k: int, tally: Tally) -> None:
         start = time.perf_counter()
-        for _ in range(steps // 3):
-            cam.render()
-        render_rate = (steps // 3) / (time.perf_counter() - start)
-    env.close()
-    return {"rgbd": rate, "render": render_rate}
+        for c in self.connections:
+            c.send(k)
+        answers = [c.recv() for c in self.connections]
+        tally.add(2 * k, time.perf_counter() - start, 0.0, sum(cpu for _, cpu in answers))
+
+    def close(self) -> None:
+        for c, proc in zip(self.connections, self.processes):
+            c.send(None)
+            proc.join(timeout=10)
+
+
+def state_and_vector(base: dict, steps: int, k: int) -> dict:
+    """Interleaved chunks: gym.make env, the unwrapped env, raw mj_step, vector envs (1, 2, async 2)."""
+    single = Single(base, 2 * steps + 2 * k)
+    vectors = {"vec1": Vector(base, steps + k, 1), "vec2": Vector(base, steps + k, 2)}
+    try:
+        vectors["main2"] = Vector(base, steps + k, 2, step_in_main=True)
+    except TypeError:  # an OpenDVectorEnv without step_in_main (comparing against older code)
+        pass
+    vectors["async2"] = Vector(base, steps + k, 2, mode="async")
+    vectors["free2"] = FreePair(base, steps + k)
+    tallies = {key: Tally() for key in ("env", "unwrapped", "raw", *vectors)}
+    try:
+        single.chunk(single.env, k, Tally())  # warm-up
+        for v in vectors.values():
+            v.chunk(k, Tally())
+        for _ in range(steps // k):
+            single.chunk(single.env, k, tallies["env"])
+            single.raw_chunk(k, tallies["raw"])
+            single.chunk(single.env.unwrapped, k, tallies["unwrapped"])
+            for key, v in vectors.items():
+                v.chunk(k, tallies[key])
+    finally:
+        single.close()
+        for v in vectors.values():
+            v.close()
+    return {"tallies": tallies, "substeps": single.substeps, "ended": single.ended}
+
+
+def image_figures(base: dict, steps: int, k: int, size: int) -> dict:
+    single = Single(base, steps + k, obs_mode="rgbd", size=size)
+    env, render, raw = Tally(), Tally(), Tally()
+    try:
+        single.chunk(single.env, k, Tally())
+        for _ in range(steps // k):
+            single.chunk(single.env, k, env)
+            single.render_chunk(k, render)
+            single.raw_chunk(k, raw)
+    finally:
+        single.close()
+    return {"env": env, "render": render, "raw": raw}
+
+
+def _row(label: str, value: str, against: str = "") -> str:
+    return f"| {label} | {value} | {against} |"
 
 
 def main() -> None:
@@ -135,50 +278,86 @@ def main() -> None:
     parser.add_argument("--cabinets", default="cabinets")
     parser.add_argument("--hand", default="allegro")
     parser.add_argument("--split", default="train")
-    parser.add_argument("--steps", type=int, default=1500, help="state steps per environment and run")
+    parser.add_argument("--steps", type=int, default=1500, help="timed state steps per contestant")
+    parser.add_argument("--chunk", type=int, default=50, help="steps per chunk (contestants take turns)")
     parser.add_argument("--image-steps", type=int, default=300, help="RGB-D steps per image size")
     parser.add_argument("--sizes", default="128,256", help="RGB-D image sizes (square), comma-separated")
     args = parser.parse_args()
-    base = {"cabinets": args.cabinets, "hand": args.hand, "split": args.split}
+    # a time limit beyond the run: no reset inside a timed chunk (60 control steps per second)
+    limit = (2 * args.steps + 4 * args.chunk) / 60.0 + 10.0
+    base = {"cabinets": args.cabinets, "hand": args.hand, "split": args.split, "time_limit": limit}
     load = os.getloadavg()
-    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs", flush=True)
+    cpus = os.cpu_count()
+    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {cpus} CPUs", flush=True)
 
-    s = state_figures(base, args.steps)
-    print(f"raw mj_step {s['raw_mj_step']:.0f}/s -> ceiling {s['ceiling']:.0f} control steps/s; "
-          f"state env {s['state']:.0f} steps/s ({s['state'] / s['ceiling']:.2f} of the ceiling)", flush=True)
-    vec1, main1 = vector_rate(base, args.steps, 1)
-    vec2, main2 = vector_rate(base, args.steps, 2)
-    async2, main_async = vector_rate(base, args.steps, 2, mode="async")
-    print(f"vector env: 1 process {vec1:.0f}, 2 processes {vec2:.0f} steps/s; gymnasium async 2 processes "
-          f"{async2:.0f}", flush=True)
+    s = state_and_vector(base, args.steps, args.chunk)
+    t, sub = s["tallies"], s["substeps"]
+    raw, env, unwrapped = t["raw"], t["env"], t["unwrapped"]
+    ceiling, cpu_ceiling = raw.rate, raw.cpu_rate  # control steps (of `sub` mj_steps) per second
+    print(f"raw mj_step {raw.rate * sub:.0f}/s -> ceiling {ceiling:.0f} control steps/s; state env {env.rate:.0f} "
+          f"steps/s ({env.rate / ceiling:.2f} of the ceiling; CPU time {env.cpu_rate / cpu_ceiling:.2f})", flush=True)
     images = []
     for size in (int(x) for x in args.sizes.split(",")):
-        f = image_figures(base, args.image_steps, size)
-        ceiling = 1.0 / (1.0 / s["ceiling"] + 1.0 / f["render"])
-        images.append((size, f, ceiling))
-        print(f"rgbd {size}: env {f['rgbd']:.0f} steps/s, renderer alone {f['render']:.0f} frames/s, "
-              f"physics + rendering ceiling {ceiling:.0f}", flush=True)
+        f = image_figures(base, args.image_steps, args.chunk, size)
+        physics = f["raw"].rate
+        both = 1.0 / (1.0 / physics + 1.0 / f["render"].rate)
+        images.append((size, f, both))
+        print(f"rgbd {size}: env {f['env'].rate:.0f} steps/s, renderer alone {f['render'].rate:.0f} frames/s, "
+              f"physics + rendering ceiling {both:.0f}", flush=True)
+    load_after = os.getloadavg()
 
+    us = 1e6
     print(f"\n## Environment benchmark (`{ENV_ID}`, {args.hand}, {args.split} split, random delta actions, "
-          f"60 Hz control, {s['substeps']} physics substeps; load average {load[0]:.1f} on {os.cpu_count()} CPUs)\n")
+          f"60 Hz control, {sub} physics substeps)\n")
+    print(f"(Load average {load[0]:.1f} when the run started and {load_after[0]:.1f} when it ended, on {cpus} CPUs: "
+          "above about 1 other work shared the cores. Compared figures ran in interleaved chunks of "
+          f"{args.chunk} steps, {args.steps} steps each; CPU figures do not count time spent waiting for a core.)\n")
     print("| figure | value | against |")
     print("|---|---:|---:|")
-    print(f"| raw `mj_step`/s on the env's own model | {s['raw_mj_step']:.0f} | |")
-    print(f"| ceiling: control steps/s (raw / {s['substeps']}) | {s['ceiling']:.0f} | |")
-    print(f"| **state steps/s, 1 process** | **{s['state']:.0f}** | **{s['state'] / s['ceiling']:.2f} of the ceiling** |")
-    print(f"| the same in CPU time of the process (steps per CPU second; ceiling {s['cpu_ceiling']:.0f}) | "
-          f"{s['cpu_state']:.0f} | {s['cpu_state'] / s['cpu_ceiling']:.2f} of the ceiling |")
-    us = 1e6
-    print(f"| state steps/s, vector env, 1 worker process (main process CPU per step {main1 * us:.0f} us) | "
-          f"{vec1:.0f} | {vec1 / s['state']:.2f}x 1 process |")
-    print(f"| **state steps/s, vector env, 2 worker processes** (main process CPU per step {main2 * us:.0f} us) | "
-          f"**{vec2:.0f}** | **{vec2 / s['state']:.2f}x 1 process, {vec2 / vec1:.2f}x 1 worker** |")
-    print(f"| state steps/s, gymnasium AsyncVectorEnv, 2 processes (main process CPU per step {main_async * us:.0f} us) "
-          f"| {async2:.0f} | {async2 / s['state']:.2f}x 1 process |")
-    for size, f, ceiling in images:
-        print(f"| RGB-D {size}x{size} steps/s, 1 process | {f['rgbd']:.0f} | {f['rgbd'] / ceiling:.2f} of physics + "
-              f"rendering ({ceiling:.0f}) |")
-        print(f"| renderer alone, RGB-D {size}x{size} frames/s | {f['render']:.0f} | |")
+    print(_row(f"raw `mj_step`/s on the env's own model and state (CPU time: {raw.cpu_rate * sub:.0f})",
+               f"{raw.rate * sub:.0f}"))
+    print(_row(f"ceiling: control steps/s (raw / {sub}; CPU time: {cpu_ceiling:.0f})", f"{ceiling:.0f}"))
+    print(_row("**state steps/s, 1 process** (`gym.make`)", f"**{env.rate:.0f}**",
+               f"**{env.rate / ceiling:.2f} of the ceiling**"))
+    print(_row("the same in CPU time of the process (steps per CPU second)", f"{env.cpu_rate:.0f}",
+               f"{env.cpu_rate / cpu_ceiling:.2f} of the ceiling"))
+    print(_row("state steps/s, `env.unwrapped` (no gymnasium wrappers; CPU time)",
+               f"{unwrapped.rate:.0f} ({unwrapped.cpu_rate:.0f})",
+               f"{unwrapped.rate / ceiling:.2f} ({unwrapped.cpu_rate / cpu_ceiling:.2f}) of the ceiling"))
+    print(_row("Python around the physics per step (CPU time)", f"{(1 / env.cpu_rate - 1 / cpu_ceiling) * us:.0f} us",
+               f"physics {us / cpu_ceiling:.0f} us"))
+    one_cpu = 1.0 / env.cpu_rate  # CPU seconds per step in one process
+    free = t["free2"]
+    print(_row("reference: 2 independent processes, an environment each, stepping at the same time "
+               "(no hand-over; CPU per step)", f"{free.rate:.0f} ({free.worker_cpu / free.steps * us:.0f} us)",
+               f"{free.rate / env.rate:.2f}x 1 process (CPU per step {free.worker_cpu / free.steps / one_cpu:.2f}x)"))
+    for key, label in (("vec1", "vector env, 1 worker process"), ("vec2", "vector env, 2 worker processes"),
+                       ("main2", "**vector env, 2 processes: `step_in_main=True` + 1 worker**"),
+                       ("async2", "gymnasium AsyncVectorEnv, 2 processes")):
+        if key not in t:
+            continue
+        v = t[key]
+        n = 1 if key == "vec1" else 2
+        workers = 1 if key in ("vec1", "main2") else 2
+        main_cpu = v.cpu / (v.steps / n)  # per vector step (with step_in_main: environment 0's step too)
+        worker = v.worker_cpu / (v.steps / n * workers)  # per step of a worker's environment
+        all_cpu = v.steps / (v.cpu + v.worker_cpu)
+        # lock-step critical path per vector step on a core per process: the main process's own work
+        # (for step_in_main, environment 0's step and the hand-over) against the slowest worker
+        critical = max(main_cpu, worker) if key == "main2" else worker + main_cpu
+        bold = "**" if key == "main2" else ""
+        print(_row(f"state steps/s, {label}", f"{bold}{v.rate:.0f}{bold}",
+                   f"{bold}{v.rate / env.rate:.2f}x 1 process{bold}"
+                   + (f", {v.rate / t['vec1'].rate:.2f}x 1 worker" if n == 2 else "")))
+        print(_row("&nbsp;&nbsp;CPU: main process per vector step / a worker per step / steps per CPU second "
+                   "of all processes", f"{main_cpu * us:.0f} us / {worker * us:.0f} us / {all_cpu:.0f}",
+                   f"{all_cpu * one_cpu:.2f} of 1 process's; a core each: {n * one_cpu / critical:.2f}x 1 process"))
+    for size, f, both in images:
+        print(_row(f"RGB-D {size}x{size} steps/s, 1 process", f"{f['env'].rate:.0f}",
+                   f"{f['env'].rate / both:.2f} of physics + rendering ({both:.0f})"))
+        print(_row(f"the scene's renderer alone, RGB-D {size}x{size} frames/s", f"{f['render'].rate:.0f}"))
+    if s["ended"]:
+        print(f"\n({s['ended']} chunks of the single environment ended an episode early and reset.)")
 
 
 if __name__ == "__main__":

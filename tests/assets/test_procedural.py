@@ -152,7 +152,8 @@ def test_partnet_format(sources):
             else:
                 assert sem[name] == ("hinge", "rotation_door")
                 assert joint["type"] == "revolute" and 1.57 <= hi <= 2.0
-                assert any(np.allclose(joint["axis"], a) for a in ([0, 1, 0], [0, -1, 0]))
+                assert any(np.allclose(joint["axis"], a)  # side-hinged doors and flaps
+                           for a in ([0, 1, 0], [0, -1, 0], [1, 0, 0], [-1, 0, 0]))
         assert not any("handle" in v[0] for v in links[body]["visuals"])
         meta = _meta(path)
         assert meta["model_cat"] == "StorageFurniture" and meta["anno_id"] == path.name
@@ -314,10 +315,14 @@ def test_doors_open_outward(sources):
             joint = links[tg["link"]]["joint"]
             (_, obj, _), = [v for v in links[tg["link"]]["visuals"] if v[0].startswith("cabinet_door")]
             v, _ = _obj_vertices_faces(obj)
-            hinge_x = v[:, 0].min() if tg["hinge"] == "left" else v[:, 0].max()
-            assert joint["origin"][0] == pytest.approx(hinge_x, abs=1e-4)
+            # side-hinged: a vertical hinge line at the left or right edge; a flap: a horizontal one at
+            # the top or bottom edge (mesh frame: y up, z out of the front)
+            along = 1 if tg["hinge"] in ("top", "bottom") else 0
+            hinge = v[:, along].min() if tg["hinge"] in ("left", "bottom") else v[:, along].max()
+            assert abs(joint["axis"][1 - along]) == pytest.approx(1.0)
+            assert joint["origin"][along] == pytest.approx(hinge, abs=1e-4)
             assert joint["origin"][2] == pytest.approx(v[:, 2].max(), abs=1e-4)
-            far = np.abs(v[:, 0] - joint["origin"][0]) > 0.01 / S
+            far = np.abs(v[:, along] - joint["origin"][along]) > 0.01 / S
             moved = _rotate(v, joint["axis"], joint["origin"], math.radians(30))
             assert np.all(moved[far, 2] > v[far, 2] + 1e-3)
             # fully open: the whole door is in front of the carcass front plane (minus its thickness)
@@ -341,6 +346,9 @@ def test_variety(sources):
     doors = [t for t in targets if t["type"] == "door"]
     assert any(t["double_door"] for t in doors) and any(not t["double_door"] for t in doors)
     assert {"left", "right"} <= {t["hinge"] for t in doors if not t["double_door"]}
+    flaps = [t for t in doors if t["hinge"] in ("top", "bottom")]
+    assert {t["hinge"] for t in flaps} == {"top", "bottom"} and any(t["double_door"] for t in flaps)
+    assert all(t["handle_orientation"] == "horizontal" for t in flaps)
     counts = Counter(len(m["targets"]) for m in metas)
     assert counts[1] > 0 and sum(c for n, c in counts.items() if n >= 4) > 0
     assert max(counts) <= 8

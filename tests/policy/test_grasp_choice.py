@@ -177,14 +177,16 @@ def test_a_bar_near_the_floor_is_grasped_from_above(hand):
     from opend_mj.policy.planner import HandPlannerConfig
     from opend_mj.sim.hands import load_spec
 
-    lift = HandPlannerConfig.for_hand(load_spec(hand)).low_handle_lift
-    assert lift > 0.0
+    numbers = HandPlannerConfig.for_hand(load_spec(hand))
+    lift, slide = numbers.low_handle_lift, numbers.hook_slide
+    assert lift > 0.0 and lift >= slide  # the lift already puts the bar that far out along the fingers
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
     handle, _, low = _choose(hand, [low_bar, *low_posts], low_bar, "door", kind="door")
     assert low.pos[2] == pytest.approx(handle.centre[2] + lift) and handle.centre[2] < 0.08
+    # 30 cm up, fingers up: at its centre, less the hand's hook slide (the bar at the middle segments)
     high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
     handle, _, high = _choose(hand, [high_bar, *high_posts], high_bar, "door", kind="door")
-    assert high.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > 0.25
+    assert high.pos[2] == pytest.approx(handle.centre[2] - slide) and handle.centre[2] > 0.25
 
 
 def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
@@ -223,3 +225,108 @@ def test_the_skeleton_grasps_no_lower_than_its_floor_clearance():
     assert mid.pos[2] == pytest.approx(handle.centre[2]) and handle.centre[2] > floor
     _, _, off = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door", min_grasp_height=None)
     assert off.pos[2] < floor - 0.015
+
+
+def test_the_hand_outline_is_the_models_collision_geometry():
+    """The open gripper seen from its grasp site: its body reaches 10.2 cm along the finger axis, its
+    pads 9.5 mm beyond the site, its flange 9.34 cm behind it (hands/franka/hand.xml); closed, the
+    fingers reach no farther along the finger axis than the body."""
+    from opend_mj.policy.planner.clearance import outline_for
+    from opend_mj.sim.hands import load_spec
+
+    spec = load_spec("franka")
+    open_hand = outline_for(spec, [0.04, 0.04])
+    assert open_hand.support([0.0, 1.0, 0.0]) == pytest.approx(0.102)
+    assert open_hand.support([0.0, 0.0, 1.0]) == pytest.approx(0.0095)
+    assert open_hand.support([0.0, 0.0, -1.0]) == pytest.approx(0.0934)
+    closed = outline_for(spec, [0.0, 0.0])
+    assert closed.support([0.0, 1.0, 0.0]) == pytest.approx(0.102)
+    assert closed.support([1.0, 0.0, 0.0]) == pytest.approx(0.03)
+
+
+def test_the_gripper_has_no_room_at_a_bar_near_the_floor_and_its_door():
+    """A 14 mm bar 4 cm above the floor, 16 mm off its door: the gripper pitched down 35 degrees (its
+    low-handle pose) reaches into the floor and the door, and no pitch from 35 to 90 degrees clears
+    both (its 20 cm body across the bar); the same bar 30 cm up clears level."""
+    from opend_mj.transforms import quat_to_mat
+
+    bar, posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.04)
+    pitches = (35.0, 45.0, 55.0, 65.0, 75.0, 90.0)
+    handle, _, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", clearance_pitches=pitches)
+    assert handle.centre[2] < 0.05
+    # nothing clears: the pose stays the hand's low-handle pose (pitched 35 degrees down)
+    assert quat_to_mat(grasp.quat)[2, 2] == pytest.approx(-np.sin(np.radians(35.0)), abs=1e-6)
+    planner_events = _choose_events("franka", [bar, *posts], bar, clearance_pitches=pitches)
+    assert any("no_clear_pose" in e for e in planner_events), planner_events
+    floor, door = next(e["no_clear_pose"] for e in planner_events if "no_clear_pose" in e)
+    assert floor < 0.0 and door < 0.0
+    high_bar, high_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.3)
+    events = _choose_events("franka", [high_bar, *high_posts], high_bar, clearance_pitches=pitches)
+    assert not any("no_clear_pose" in e or "clearance_pitch" in e for e in events), events
+
+
+def _choose_events(hand, boxes, handle_box, **hand_numbers):
+    """The planner's events while choosing the grasp of a door's handle in a synthetic scene."""
+    from dataclasses import replace
+
+    from opend_mj.policy.perception import estimate_handle
+    from opend_mj.policy.planner import HandPlannerConfig, Observation, PlanResult, Planner, PlannerConfig
+    from opend_mj.policy.solvers import get_solver
+    from opend_mj.sim.hands import load_spec
+
+    view = _view()
+    depth = _render(view, boxes)
+    box = _box_of(view, *handle_box)
+    spec = load_spec(hand)
+    planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), spec, PlannerConfig(),
+                      hand=replace(HandPlannerConfig.for_hand(spec), **hand_numbers))
+    obs = Observation(rgb=None, depth=depth, instruction="door", camera_view=view)
+    result = PlanResult(stage_reached="locate", failed_stage=None, target_kind="door")
+    handle = estimate_handle(box, depth, view, planner.config.perception)
+    planner.choose_grasp(handle, planner.perceive(handle, box, obs, result), obs, result)
+    return result.events
+
+
+def _knob(z, size=0.04, depth=0.028):
+    return ((PANEL_X - depth, -size / 2, z - size / 2), (PANEL_X, size / 2, z + size / 2))
+
+
+@pytest.mark.parametrize("hand", ["franka", "allegro"])
+def test_a_knob_near_the_floor_is_grasped_with_the_hand_turned(hand):
+    """A 40 mm knob 4 cm above the floor: grasped level with the fingers across it up and down,
+    the gripper's 20 cm body (the Allegro's open fingers) would reach into the floor; turned a
+    quarter about the approach axis (fingers to the sides) it has more room, and a knob is round.
+    The same knob 40 cm up is grasped as the hand's grasp.json says (horizontal)."""
+    low = _knob(0.04)
+    handle, _, grasp = _choose(hand, [low], low, "door", kind="door")
+    assert handle.kind == "knob"
+    assert grasp.orientation == "vertical"
+    events = _choose_events(hand, [low], low)
+    turned = next(e["knob_turned"] for e in events if "knob_turned" in e)
+    assert turned[0] == "vertical" and min(turned[3:]) > min(turned[1:3])
+    high = _knob(0.4)
+    _, _, grasp = _choose(hand, [high], high, "door", kind="door")
+    assert grasp.orientation == "horizontal"
+    # a hand that does not check (clearance_margin null) keeps its orientation near the floor too
+    _, _, grasp = _choose(hand, [low], low, "door", kind="door", clearance_margin=None)
+    assert grasp.orientation == "horizontal"
+
+
+def test_the_pitch_search_takes_the_first_pitch_that_clears():
+    """A 10 mm bar 7 cm above the floor with 45 mm behind it, the gripper's fixed low-handle pitch
+    off: level, its body reaches into the floor; of 10, 35 and 60 degrees, 10 does not clear, 35
+    does (both clearances at least the margin), and the grasp is approached pitched by it."""
+    from opend_mj.policy.planner.clearance import clearances, outline_for
+    from opend_mj.sim.hands import load_spec
+    from opend_mj.transforms import quat_to_mat
+
+    bar, posts = _bar(thickness=0.01, gap=0.045, length=0.2, z=0.07)
+    numbers = dict(low_handle_pitch=0.0, clearance_pitches=(10.0, 35.0, 60.0))
+    handle, shape, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", **numbers)
+    events = _choose_events("franka", [bar, *posts], bar, **numbers)
+    pitch = next(e["clearance_pitch"] for e in events if "clearance_pitch" in e)
+    assert pitch[0] == 35.0 and min(pitch[1:]) >= 0.003
+    assert quat_to_mat(grasp.quat)[2, 2] == pytest.approx(-np.sin(np.radians(35.0)), abs=1e-6)
+    floor, door = clearances(outline_for(load_spec("franka"), grasp.pre), grasp.pos, grasp.quat,
+                             handle.front_x + shape.protrusion)
+    assert floor >= 0.003 and door >= 0.003

@@ -8,9 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-#: procedural cabinets (generator seed 0): proc_0004 is a drawer stack, proc_0006 a double door
+#: procedural cabinets (generator seed 0) as generator version 4 drew them: proc_0004 is a drawer
+#: stack, proc_0006 a double door (side-hinged; version 5 made it a pair of flaps)
 DRAWER = ("proc_0004", 4, "joint_0")
 DOOR = ("proc_0006", 6, "joint_0")
+
+
+def _v4(**changes):
+    """The generator configuration of version 4 (no flaps, long bars anywhere in range, bars 25 mm
+    from a door's free edge), with ``changes``."""
+    from opend_mj.assets.procedural import GeneratorConfig
+
+    return GeneratorConfig(flap_share=0.0, long_bar_min_frac=0.0, door_bar_end_margin_range=(0.025, 0.025),
+                           **changes)
 
 
 def _forward_view():
@@ -30,7 +40,7 @@ def planner_cabinets(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("planner_cabinets")
     out = {}
     for cid, index, _ in (DRAWER, DOOR):
-        src = generate_source(index, 0, root / "src")
+        src = generate_source(index, 0, root / "src", _v4())
         res = compile_cabinet(src, root / "built", cache_dir=root / "cache")
         assert (root / "built" / cid / "cabinet.json").is_file(), res
         out[cid] = root / "built" / cid
@@ -403,11 +413,9 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     from opend_mj.evaluation.runner import run_episode
     from opend_mj.policy.solvers import register_solver
 
-    from opend_mj.assets.procedural import GeneratorConfig
-
     # generator version 3's proc_0067 (fronts inset above the floor, bars up to 17 mm), whose doors and
     # drawer this scenario was written for
-    v3 = GeneratorConfig(base_shares=(0.0, 1.0, 0.0, 0.0), bar_diameter_range=(0.005, 0.017))
+    v3 = _v4(base_shares=(0.0, 1.0, 0.0, 0.0), bar_diameter_range=(0.005, 0.017))
     src = generate_source(67, 0, tmp_path / "src", v3)
     compile_cabinet(src, tmp_path / "built", cache_dir=tmp_path / "cache")
     cab = tmp_path / "built" / "proc_0067"

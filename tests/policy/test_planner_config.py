@@ -79,6 +79,8 @@ def test_a_hand_without_a_planner_file_gets_its_types_numbers(tmp_path):
     ({"hold_parts": 0}, "hold_parts"),
     ({"pinch_gap": "wide"}, "'pinch_gap' must be a number"),
     ({"min_grasp_height": None, "low_handle_pitch": None}, "'low_handle_pitch' must be a number"),
+    ({"clearance_pitches": [35, 120]}, "'clearance_pitches' must be a list of degrees"),
+    ({"clearance_knob_turn": 1}, "'clearance_knob_turn' must be true or false"),
 ])
 def test_a_bad_planner_file_is_named_in_the_error(tmp_path, content, message):
     from opend_mj.policy.planner import HandPlannerConfig

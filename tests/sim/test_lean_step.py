@@ -91,33 +91,39 @@ def test_image_modes_render_only_what_they_name_and_match_the_reference(small_da
             reference.close()
 
 
-def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset):
+@pytest.mark.parametrize("step_in_main", [False, True])
+def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, step_in_main):
     kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)  # truncated at step 15 (0.25 s)
-    envs = gym.make_vec(ENV_ID, num_envs=2, **kwargs)
-    single = gym.make(ENV_ID, **kwargs)
+    envs = gym.make_vec(ENV_ID, num_envs=2, step_in_main=step_in_main, **kwargs)
+    singles = [gym.make(ENV_ID, **kwargs) for _ in range(2)]
     try:
         assert type(envs).__name__ == "OpenDVectorEnv"
+        assert len(envs.unwrapped.worker_cpu_seconds()) == (1 if step_in_main else 2)
         obs, info = envs.reset(seed=4)
-        one, one_info = single.reset(seed=5)  # environment 1 runs the episode of seed 4 + 1
-        for key in one:
-            assert np.array_equal(obs[key][1], one[key]), key
-        assert info["cabinet"][1] == one_info["cabinet"] and info["episode_seed"][1] == 5
+        for i, single in enumerate(singles):
+            one, one_info = single.reset(seed=4 + i)  # environment i runs the episode of seed 4 + i
+            for key in one:
+                assert np.array_equal(obs[key][i], one[key]), key
+            assert info["cabinet"][i] == one_info["cabinet"] and info["episode_seed"][i] == 4 + i
         rng = np.random.default_rng(0)
         for t in range(15):
             actions = rng.uniform(-1, 1, envs.action_space.shape).astype(np.float32)
             obs, reward, terminated, truncated, info = envs.step(actions)
-            s_obs, s_reward, s_term, s_trunc, s_info = single.step(actions[1])
-            for key in s_obs:
-                assert np.array_equal(obs[key][1], s_obs[key]), (t, key)
-            assert (reward[1], terminated[1], truncated[1]) == (s_reward, s_term, s_trunc)
-            assert info["open_ratio"][1] == s_info["open_ratio"]
-            assert info["reward_terms"]["distance"][1] == s_info["reward_terms"]["distance"]
+            for i, single in enumerate(singles):
+                s_obs, s_reward, s_term, s_trunc, s_info = single.step(actions[i])
+                for key in s_obs:
+                    assert np.array_equal(obs[key][i], s_obs[key]), (t, key)
+                assert (reward[i], terminated[i], truncated[i]) == (s_reward, s_term, s_trunc)
+                assert info["open_ratio"][i] == s_info["open_ratio"] and info["success"][i] == s_info["success"]
+                for key, value in s_info["reward_terms"].items():
+                    assert info["reward_terms"][key][i] == value, key
         assert truncated.all() and obs["time"][0, 0] == pytest.approx(15 / 60)
         obs, reward, terminated, truncated, info = envs.step(np.zeros(envs.action_space.shape))  # autoreset
         assert (reward == 0).all() and not (terminated | truncated).any() and (obs["time"][:, 0] == 0).all()
     finally:
         envs.close()
-        single.close()
+        for single in singles:
+            single.close()
 
 
 def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):

@@ -240,3 +240,83 @@ def test_retargeted_scene_starts_like_a_new_one(proc_cabinets):
     finally:
         env.close()
         fresh.close()
+
+
+def _slerp_every_row(q, target, step_angle, n):
+    """The mocap's bounded-speed slerp path computed row by row to the end (the reference)."""
+    import math
+
+    q = np.asarray(q, float) / math.sqrt(sum(float(x) * float(x) for x in q))
+    t = np.asarray(target, float) / math.sqrt(sum(float(x) * float(x) for x in target))
+    q0, q1, q2, q3 = (float(x) for x in q)
+    t0, t1, t2, t3 = (float(x) for x in t)
+    dot = q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3
+    if dot < 0:
+        t0, t1, t2, t3, dot = -t0, -t1, -t2, -t3, -dot
+    angle = 2 * math.acos(min(1.0, dot))
+    half = angle / 2
+    rows = []
+    for k in range(1, n + 1):
+        s = min(k * step_angle / angle, 1.0)
+        a, b = math.sin((1 - s) * half) / math.sin(half), math.sin(s * half) / math.sin(half)
+        x = (a * q0 + b * t0, a * q1 + b * t1, a * q2 + b * t2, a * q3 + b * t3)
+        norm = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
+        rows.append(tuple(v / norm for v in x))
+    return np.array(rows)
+
+
+def test_slerp_path_repeats_the_arrival_row_and_says_where_it_arrives():
+    from opend_mj.sim.task import _slerp_path
+
+    rng = np.random.default_rng(0)
+    arrived_early = 0
+    for _ in range(500):
+        q = rng.normal(size=4)
+        target = q / np.linalg.norm(q) + rng.normal(size=4) * rng.choice([0.003, 0.02, 0.5])
+        path, writes = _slerp_path(q, target, 4 / 480, 8)
+        assert path.tobytes() == _slerp_every_row(q, target, 4 / 480, 8).tobytes()
+        assert 1 <= writes <= 8 and (path[writes - 1:] == path[-1]).all()
+        arrived_early += writes < 8
+    assert arrived_early > 50
+
+
+def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep(door_case):
+    """`fast_substeps` runs the substeps after the mocap reaches its target pose as one mj_step(n)
+    call: the same state, to the bit, as writing every row of the path and stepping once each."""
+    import mujoco
+
+    cabinet, target = door_case
+    env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0),
+                           TaskConfig(enable_rgbd=False), observations=False)
+    try:
+        env.reset()
+        task, physics = env.task, env.physics
+        model, data = physics.model.ptr, physics.data.ptr
+        quat = task.start_pose[1]
+        mid = task._mocap_id
+        copy = mujoco.MjData(model)
+        merged = 0
+        for k in range(60):
+            # toward the cabinet from where the mocap is: within its top speed (1.25 cm per control
+            # step) on two steps of three, beyond it on the third; turning a little, or not at all
+            delta = np.array([0.002 + 0.006 * (k % 3), 0.001 * np.sin(k), 0.0])
+            quat = quat + 0.004 * (k % 4) * np.array([np.cos(k * 0.1), 0, 0, np.sin(k * 0.1)])
+            action = task.make_action(data.mocap_pos[mid] + delta, quat / np.linalg.norm(quat),
+                                      task.hand.spec.open_pose)
+            task.before_step(physics, action, None)
+            mujoco.mj_copyData(copy, model, data)
+            for i in range(task._substeps):  # the reference: every row written, one mj_step each
+                if task._path_pos is not None:
+                    copy.mocap_pos[task._mocap_id] = task._path_pos[i]
+                if task._path_quat is not None:
+                    copy.mocap_quat[task._mocap_id] = task._path_quat[i]
+                mujoco.mj_step(model, copy)
+            mujoco.mj_kinematics(model, copy)
+            merged += task._path_writes < task._substeps
+            task.fast_substeps(physics, cameras=False)
+            for field in ("qpos", "qvel", "act", "mocap_pos", "mocap_quat", "xpos", "qacc_warmstart"):
+                assert getattr(data, field).tobytes() == getattr(copy, field).tobytes(), (k, field)
+            assert data.time == copy.time
+        assert merged > 10  # the merged tail was exercised
+    finally:
+        env.close()

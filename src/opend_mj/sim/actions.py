@@ -32,6 +32,9 @@ class ActionAdapter:
         self.n_fingers = len(ids)
         self.step_pos = task_config.max_root_speed / task_config.control_hz
         self.step_rot = task_config.max_root_angular_speed / task_config.control_hz
+        self._unit_low, self._unit_high = -np.ones(self.delta_dim), np.ones(self.delta_dim)
+        self._finger_low_list = self.finger_low.tolist()
+        self._span_list = (self.finger_high - self.finger_low).tolist()
 
     @property
     def delta_dim(self) -> int:
@@ -59,29 +62,38 @@ class ActionAdapter:
 
         Plain float arithmetic where numpy's would be per-call overhead on 3- and 4-vectors; the
         operations and their order are those of ``pos + a * step``, `axis_angle_quat`, `quat_mul`
-        and `fingers_from_unit` (``np.linalg.norm`` of a vector is ``sqrt(v.dot(v))``), so the
-        numbers are the same to the bit.
+        and `fingers_from_unit` (``np.linalg.norm`` of a vector is ``sqrt(v.dot(v))``; dot products
+        stay numpy's, whose BLAS may fuse multiply-adds; ``np.clip(a, -1, 1)`` is
+        ``minimum(maximum(a, -1), 1)`` with array bounds), so the numbers are the same to the bit.
         """
-        a = np.clip(np.asarray(action, float), -1.0, 1.0)
+        a = np.asarray(action, float)
         if a.shape != (self.delta_dim,):
             raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
-        out = np.empty(7 + self.n_fingers)
-        out[:3] = mocap_pos + a[:3] * self.step_pos
-        rotvec = a[3:6] * self.step_rot
+        a = np.minimum(np.maximum(a, self._unit_low), self._unit_high)
+        values = a.tolist()
+        px, py, pz = np.asarray(mocap_pos, float).tolist()
+        sp, sr = self.step_pos, self.step_rot
+        ax, ay, az = values[3] * sr, values[4] * sr, values[5] * sr
+        rotvec = np.array((ax, ay, az))
         angle = math.sqrt(rotvec @ rotvec)
         if angle > 1e-12:
-            axis = rotvec / angle
-            axis = axis / math.sqrt(axis.dot(axis))
-            s = float(np.sin(angle / 2))
-            w1, x1, y1, z1 = float(np.cos(angle / 2)), s * float(axis[0]), s * float(axis[1]), s * float(axis[2])
+            axis = np.array((ax / angle, ay / angle, az / angle))
+            norm = math.sqrt(axis.dot(axis))
+            half = angle / 2
+            s = float(np.sin(half))
+            w1, x1, y1, z1 = (float(np.cos(half)), s * (ax / angle / norm), s * (ay / angle / norm),
+                              s * (az / angle / norm))
             w2, x2, y2, z2 = np.asarray(mocap_quat, float).tolist()
-            quat = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                             w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-            out[3:7] = quat / math.sqrt(quat.dot(quat))
+            quat = np.array((w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                             w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2))
+            quat /= math.sqrt(quat.dot(quat))
+            quat = quat.tolist()
         else:
-            out[3:7] = mocap_quat
-        out[7:] = self.finger_low + (a[6:] + 1.0) * 0.5 * (self.finger_high - self.finger_low)
-        return out
+            quat = np.asarray(mocap_quat, float).tolist()
+        head = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp, *quat]
+        fingers = [lo + (u + 1.0) * 0.5 * span
+                   for lo, u, span in zip(self._finger_low_list, values[6:], self._span_list)]
+        return np.array(head + fingers)
 
     def from_delta_reference(self, action, mocap_pos, mocap_quat) -> np.ndarray:
         """`from_delta` written with the rotation helpers (the reference it is tested against)."""

@@ -256,10 +256,26 @@ class OpenDCore:
                 self._float_keys.append((key, slice(offset, offset + size), shape))
                 offset += size
         self._slices = {key: sl for key, sl, _ in self._float_keys}
+        # the float vector's keys, then the text instruction and the images (not in the vector)
+        self.set_observation_order([key for key, _, _ in self._float_keys]
+                                   + [k for k, (_, kind) in layout.items() if kind != "float" or k == "depth"])
         #: every float observation but depth, float64, at the offsets of `_slices`
         self._flat = np.zeros(offset)
         self._rgb = config.obs_mode in ("rgb", "rgbd")
         self._depth = config.obs_mode in ("depth", "rgbd")
+
+    def set_observation_order(self, keys) -> None:
+        """The key order of the observation dicts `observe` returns (e.g. the gymnasium space's).
+
+        Keys of the float vector become views of one copy of it (reshaped only where they are not
+        flat); images and the text instruction follow in this order.
+        """
+        self._order = tuple(keys)
+        floats = {key: (sl, shape) for key, sl, shape in self._float_keys}
+        self._float_plan = [(key, *floats[key]) if len(floats[key][1]) != 1 else (key, floats[key][0], None)
+                            for key in self._order if key in floats]
+        #: every key is a float of the vector (state mode, one-hot instruction): the views alone
+        self._floats_only = len(self._float_plan) == len(self._order)
 
     @property
     def control_dt(self) -> float:
@@ -324,11 +340,10 @@ class OpenDCore:
         """The task's own action for ``action`` in this environment's control mode."""
         if self.config.control == "absolute":
             return np.asarray(action, dtype=np.float64)
-        d = self.scene._data
-        mid = self.scene._mocap
         if not self.config.lean_step:
+            d, mid = self.scene._data, self.scene._mocap
             return self.adapter.from_delta_reference(action, d.mocap_pos[mid], d.mocap_quat[mid])
-        return self.adapter.from_delta(action, d.mocap_pos[mid], d.mocap_quat[mid])
+        return self.adapter.from_delta(action, *self.scene.task.mocap_views)
 
     def step(self, action, dtype=np.float64, observe: bool = True) -> tuple[dict | None, float, bool, bool, dict]:
         """One control step: (observation, reward, terminated, truncated, info); float observations
@@ -397,7 +412,9 @@ class OpenDCore:
         c, scene = self.config, self.scene
         if filled:
             flat = self._flat.astype(dtype)
-            obs = {key: flat[sl].reshape(shape) for key, sl, shape in self._float_keys}
+            obs = {key: flat[sl] if shape is None else flat[sl].reshape(shape) for key, sl, shape in self._float_plan}
+            if self._floats_only:
+                return obs
         else:
             obs = {key: np.asarray(v, dtype=dtype) for key, v in scene.proprio().items()}
             if c.instruction == "onehot":
@@ -409,7 +426,7 @@ class OpenDCore:
         if c.instruction == "text":
             obs["instruction"] = self.episode.instruction
         obs.update(self.images())
-        return obs
+        return {key: obs[key] for key in self._order}
 
     @property
     def flat(self) -> np.ndarray:

@@ -65,11 +65,12 @@ class OpenCabinetEnv(gym.Env):
         self.observation_space = observation_space(self.core)
         self.action_space = action_space(self.core)
         self.action_names = self.core.action_names()
+        self.core.set_observation_order(self.observation_space.spaces)
 
     def _obs(self, raw: dict) -> dict:
-        """The core's observation in the spaces' dtypes and key order (the core already gives float32
-        views of one vector, rgb uint8 and depth float32; this only orders the keys)."""
-        return {key: raw[key] for key in self.observation_space.spaces}
+        """The core's observation in the spaces' dtypes and key order (the core gives float32 views
+        of one vector, rgb uint8 and depth float32, in the space's key order already)."""
+        return raw
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -129,10 +129,12 @@ class RewardProbe:
                                       for t in task.cabinet.targets}
         self._joints = list(self._qpos)
         self._addresses = np.array([self._qpos[j] for j in self._joints], dtype=int)
-        #: (joint, handle geom ids, their corners in the geom frame, handle mask, their bodies)
+        #: (joint, handle geom ids, their corners in the geom frame, handle mask, their bodies, views
+        #: of those bodies' xpos and xquat rows)
         self._bound: tuple | None = None
         self._box_cache: tuple = (None, None)  # (pose bytes of the handle bodies, (lo, hi))
         self.start_distance = 0.0
+        self._zeros3 = np.zeros(3)
 
     def handle_geoms(self, joint: str) -> np.ndarray:
         ids = self._handles.get(joint)
@@ -155,7 +157,9 @@ class RewardProbe:
             mask = np.zeros(self._model.ngeom, dtype=bool)
             mask[ids] = True
             bodies = np.unique(self._model.geom_bodyid[ids]) if len(ids) else np.zeros(0, dtype=int)
-            self._bound = bound = (joint, np.asarray(ids, dtype=int), local, mask, bodies)
+            # views of those bodies' position and quaternion rows (the box cache's key)
+            poses = [row for b in bodies for row in (self._data.xpos[b], self._data.xquat[b])]
+            self._bound = bound = (joint, np.asarray(ids, dtype=int), local, mask, bodies, poses)
             self._box_cache = (None, None)
         return bound
 
@@ -168,19 +172,22 @@ class RewardProbe:
         """
         if joint is not None and joint != self.task.target.joint:
             return self._handle_box(joint)
-        bodies = self._bind(self.task.target.joint)[4]
-        data = self._data
-        key = data.xpos[bodies].tobytes() + data.xquat[bodies].tobytes()
+        lo, hi = self.target_box()
+        return lo.copy(), hi.copy()
+
+    def target_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """`handle_box` of the instructed target, the cached arrays themselves (not to be changed)."""
+        key = b"".join([row.tobytes() for row in self._bind(self.task.target.joint)[5]])
         cached_key, box = self._box_cache
         if key != cached_key:
             box = self._handle_box(self.task.target.joint)
             self._box_cache = (key, box)
-        return box[0].copy(), box[1].copy()
+        return box
 
     def _handle_box(self, joint: str) -> tuple[np.ndarray, np.ndarray]:
         """`handle_box` computed now (all handle geoms' box corners in one batched product)."""
         if joint == self.task.target.joint:
-            _, ids, local, _, _ = self._bind(joint)
+            _, ids, local, _, _, _ = self._bind(joint)
         else:
             ids = self.handle_geoms(joint)
             aabb = self._model.geom_aabb
@@ -215,9 +222,9 @@ class RewardProbe:
 
     def distance(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
         """Grasp site to the instructed handle's box (m; 0 inside it)."""
-        lo, hi = box if box is not None else self.handle_box()
+        lo, hi = box if box is not None else self.target_box()
         site = self._data.site_xpos[self._site]
-        outside = np.maximum(0.0, np.maximum(lo - site, site - hi))
+        outside = np.maximum(self._zeros3, np.maximum(lo - site, site - hi))  # = np.maximum(0.0, ...)
         return float(np.sqrt(outside @ outside))
 
     def contact(self) -> bool:
@@ -251,17 +258,27 @@ class RewardProbe:
         """The reward terms of `terms`, from the contacts' geom pairs (``data.contact.geom1/2``, read
         once per step by the caller) and, optionally, the handle box already computed this step."""
         task = self.task
-        target = task.target
+        target, checker = task.target, task.checker
         handle_mask = self._bind(target.joint)[3]
-        values = dict(zip(self._joints, self._data.qpos[self._addresses].tolist()))
-        outcome = task.checker.check_values(values)
-        others = [t.range_ratio(values[t.joint]) for t in task.cabinet.targets if t.joint != target.joint]
+        # what checker.check_values computes (the same Target methods on the same joint values),
+        # without its dict and Outcome, and each other target's range ratio once
+        q, others = 0.0, []
+        for t, value in zip(task.cabinet.targets, self._data.qpos[self._addresses].tolist()):
+            if t.joint == target.joint:
+                q = value
+            else:
+                others.append(t.range_ratio(value))
+        open_ratio = target.open_ratio(q)
+        # the largest other range ratio: others moved when it is above the threshold (range ratios
+        # are never NaN: max(0.0, NaN) is 0.0)
+        others_range = max(others, default=0.0)
         if len(geom1):
             hand = self._hand_mask
             contact = bool(np.any((hand[geom1] & handle_mask[geom2]) | (hand[geom2] & handle_mask[geom1])))
         else:
             contact = False
         return RewardTerms(distance=self.distance(box), start_distance=self.start_distance, contact=contact,
-                           open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
-                           success=bool(outcome.success), others_moved=bool(outcome.others_moved),
-                           range_ratio=float(outcome.range_ratio))
+                           open_ratio=float(open_ratio), others_range=others_range,
+                           success=bool(open_ratio > checker.threshold),
+                           others_moved=bool(others) and others_range > checker.moved_threshold,
+                           range_ratio=float(target.range_ratio(q)))

@@ -51,6 +51,7 @@ class SceneReader:
         self._touch = HandTouch(task.hand, physics)
         self._camera = None
         self._slices: dict[str, slice] = {}
+        self._views: tuple | None = None
         self._camera_cache: dict | None = None
 
     # ------------------------------------------------------------------ reference path
@@ -80,6 +81,28 @@ class SceneReader:
         """Offsets of each float observation in the vector `fill` writes (keys it does not know are
         left alone: the caller writes them)."""
         self._slices = dict(slices)
+        self._views = None
+
+    def _bind_views(self, out: np.ndarray) -> tuple:
+        """(out, [(destination, source)] of the plain copies `fill` makes, [(destination, source,
+        indices)] of its gathers, ...): views of ``out``'s slices and of the MjData rows they copy
+        (one MjData per scene, so the rows stay valid). The finger joints' qpos and qvel addresses
+        are usually one run each: then they are plain copies too."""
+        d, s = self._data, self._slices
+        sources = {"root_pos": d.xpos[self._root], "root_quat": d.xquat[self._root],
+                   "root_vel": d.qvel[self._free_dof:self._free_dof + 6], "grasp_site_pos": d.site_xpos[self._site],
+                   "mocap_pos": d.mocap_pos[self._mocap], "mocap_quat": d.mocap_quat[self._mocap]}
+        gathers = []  # (destination, source array, indices) where the indices are not one run
+        for key, source, index in (("hand_qpos", d.qpos, self._qpos), ("hand_qvel", d.qvel, self._qvel)):
+            first = int(index[0]) if len(index) else 0
+            if np.array_equal(index, np.arange(first, first + len(index))):
+                sources[key] = source[first:first + len(index)]  # a run of addresses: a plain copy
+            else:
+                gathers.append((out[s[key]], source, index))
+        copies = [(out[s[key]], source) for key, source in sources.items()]
+        keys = ("grasp_site_quat", "touch", "time")
+        self._views = (out, copies, gathers, *(out[s[key]] for key in keys), d.site_xmat[self._site])
+        return self._views
 
     def fill(self, out: np.ndarray, privileged: bool = False):
         """Write the proprioceptive (and with ``privileged`` the ground-truth) observations into
@@ -87,21 +110,22 @@ class SceneReader:
 
         The same numbers as `proprio`, `privileged` and `RewardProbe.terms`, to the bit.
         """
-        d, s = self._data, self._slices
-        np.take(d.qpos, self._qpos, out=out[s["hand_qpos"]])
-        np.take(d.qvel, self._qvel, out=out[s["hand_qvel"]])
-        out[s["root_pos"]] = d.xpos[self._root]
-        out[s["root_quat"]] = d.xquat[self._root]
-        out[s["root_vel"]] = d.qvel[self._free_dof:self._free_dof + 6]
-        out[s["grasp_site_pos"]] = d.site_xpos[self._site]
-        out[s["grasp_site_quat"]] = mat9_to_quat(d.site_xmat[self._site])
-        out[s["mocap_pos"]] = d.mocap_pos[self._mocap]
-        out[s["mocap_quat"]] = d.mocap_quat[self._mocap]
+        d = self._data
+        views = self._views
+        if views is None or views[0] is not out:
+            views = self._bind_views(out)
+        _, copies, gathers, site_quat, touch, time, site_xmat = views
+        for destination, source in copies:
+            destination[...] = source
+        for destination, source, index in gathers:
+            np.take(source, index, out=destination)
+        site_quat[:] = mat9_to_quat(site_xmat)
         contact = d.contact  # one read of the contact list for touch and the reward's contact term
-        out[s["touch"]] = self._touch.vector_from(contact)
-        out[s["time"]] = d.time
-        box = self.probe.handle_box()
+        touch[:] = self._touch.vector_from(contact)
+        time[0] = d.time
+        box = self.probe.target_box()
         if privileged:
+            s = self._slices
             lo, hi = box
             out[s["handle_pos"]] = (lo + hi) / 2
             out[s["handle_size"]] = hi - lo

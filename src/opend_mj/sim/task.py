@@ -9,6 +9,7 @@ threshold (20 % by default; drawer delta / drawer length, door angle / 180 degre
 
 from __future__ import annotations
 
+import bisect
 import math
 import os
 
@@ -143,6 +144,10 @@ class OpenCabinetTask(composer.Task):
         #: Distance the mocap may have travelled by the end of each substep (bounded speed).
         self._substep_travel = np.arange(1, self._substeps + 1, dtype=float)[:, None] * (
             config.max_root_speed * config.physics_timestep)
+        self._travel_list = self._substep_travel[:, 0].tolist()
+        #: Substeps of this control step whose mocap write changes the mocap pose: from there on the
+        #: path's rows are all the same (the target is reached), so the rest run in one mj_step call.
+        self._path_writes = 0
         self._action_shape = (7 + self._n_fingers,)
         self._add_observables()
 
@@ -232,7 +237,8 @@ class OpenCabinetTask(composer.Task):
         action = np.asarray(action, dtype=float)
         if action.shape != self._action_shape:
             raise ValueError(f"action has shape {action.shape}, expected {self._action_shape}")
-        if not math.isfinite(float(action @ action)) and not np.isfinite(action).all():  # dot: the fast test
+        # the fast test: a sum of finite numbers can only overflow, which the full test then clears
+        if not math.isfinite(sum(action.tolist())) and not np.isfinite(action).all():
             raise ValueError(f"action has non-finite values: {action}")
         quat = action[3:7]
         norm = math.sqrt(float(quat @ quat))
@@ -242,7 +248,10 @@ class OpenCabinetTask(composer.Task):
         self._root_target = (np.minimum(np.maximum(action[:3], lo), hi), quat / norm)
         self._plan_mocap_path()
         lo, hi = self._ctrl_range
-        self._data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
+        if self._ctrl_view is not None:
+            self._ctrl_view[...] = np.minimum(np.maximum(action[7:], lo), hi)
+        else:
+            self._data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
 
     def _plan_mocap_path(self) -> None:
         """Mocap poses for each substep of this control step: toward the target at bounded speed.
@@ -250,22 +259,26 @@ class OpenCabinetTask(composer.Task):
         ``_path_pos`` / ``_path_quat`` hold one row per substep, or None where the mocap stays put
         (position reached / no rotation left), which lets the substep loop skip the writes.
         """
-        data, mid = self._data, self._mocap_id
-        pos, quat = data.mocap_pos[mid], data.mocap_quat[mid]
+        pos, quat = self.mocap_views
         target_pos, target_quat = self._root_target
         delta = target_pos - pos
         dist = math.sqrt(float(delta @ delta))
+        writes = 0
         if dist > 1e-12:
             self._path_pos = pos + (delta / dist) * np.minimum(self._substep_travel, dist)
+            # rows from the first whose travel reaches dist on are pos + unit * dist, all the same
+            writes = min(bisect.bisect_left(self._travel_list, dist) + 1, self._substeps)
         else:
             self._path_pos = None
         if abs(float(quat @ target_quat)) > 1.0 - 1e-12:  # no rotation: the common case
             self._path_quat = None
-            data.mocap_quat[mid] = target_quat
+            quat[...] = target_quat
         else:
-            self._path_quat = _slerp_path(quat, target_quat,
-                                          self.config.max_root_angular_speed * self.config.physics_timestep,
-                                          self._substeps)
+            self._path_quat, quat_writes = _slerp_path(
+                quat, target_quat, self.config.max_root_angular_speed * self.config.physics_timestep,
+                self._substeps)
+            writes = max(writes, quat_writes)
+        self._path_writes = writes
         self._substep = 0
 
     def before_substep(self, physics, action, random_state):
@@ -280,34 +293,39 @@ class OpenCabinetTask(composer.Task):
         """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
 
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
-        composer's per-substep Python hooks; where the mocap does not move, the substeps are one
-        ``mj_step(model, data, n)`` call. Afterwards the kinematics (bodies, sites, geoms, cameras,
-        lights) are brought up to date with the new state, so that readers see where things are;
-        this does not change the trajectory (each ``mj_step`` recomputes them first). With
+        composer's per-substep Python hooks; once the mocap has reached its target pose (at once
+        when it does not move) the remaining substeps are one ``mj_step(model, data, n)`` call.
+        Afterwards the kinematics (bodies, sites, geoms, cameras, lights) are brought up to date
+        with the new state, so that readers see where things are; this does not change the
+        trajectory (each ``mj_step`` recomputes them first). With
         ``cameras=False`` only body, geom and site poses are brought up to date (``mj_kinematics``),
         not centre-of-mass quantities, cameras or lights: for readers that render nothing and read
         no camera (the state-only environments). Returns the names of MuJoCo instability warnings
         raised in this control step.
         """
-        model, data = physics.model.ptr, physics.data.ptr
+        model, data = self._model, self._data  # physics's, cached at the episode's start
         stats = self._warning_stats(data)
         before = [w.number for w in stats]
         path_pos, path_quat = self._path_pos, self._path_quat
-        if path_pos is None and path_quat is None:
-            _mujoco.mj_step(model, data, self._substeps)
-        else:
-            mocap_pos, mocap_quat, mid = data.mocap_pos, data.mocap_quat, self._mocap_id
-            for i in range(self._substeps):
+        writes = self._path_writes if path_pos is not None or path_quat is not None else 0
+        if writes:
+            mocap_pos, mocap_quat = self.mocap_views
+            for i in range(writes):
                 if path_pos is not None:
-                    mocap_pos[mid] = path_pos[i]
+                    mocap_pos[...] = path_pos[i]
                 if path_quat is not None:
-                    mocap_quat[mid] = path_quat[i]
+                    mocap_quat[...] = path_quat[i]
                 _mujoco.mj_step(model, data)
+        if writes < self._substeps:  # the mocap pose no longer changes (mj_step leaves it alone): one call
+            _mujoco.mj_step(model, data, self._substeps - writes)
         _mujoco.mj_kinematics(model, data)
         if cameras:
             _mujoco.mj_comPos(model, data)
             _mujoco.mj_camlight(model, data)
-        return [_WARNING_NAMES[i] for i, (w, n) in enumerate(zip(stats, before)) if w.number > n]
+        after = [w.number for w in stats]
+        if after == before:  # the common case: no instability warning in this control step
+            return []
+        return [_WARNING_NAMES[i] for i, (a, b) in enumerate(zip(after, before)) if a > b]
 
     def _warning_stats(self, data) -> list:
         """Live views of MjData's instability warning counters (cached per MjData)."""
@@ -334,6 +352,13 @@ class OpenCabinetTask(composer.Task):
                                      for a in self.hand.actuators])
         ranges = physics.model.actuator_ctrlrange[self._ctrl_index]
         self._ctrl_range = (ranges[:, 0], ranges[:, 1])
+        # views of the rows every control step writes (this MjData's, refreshed at each episode)
+        data, first = self._data, int(self._ctrl_index[0])
+        contiguous = np.array_equal(self._ctrl_index, np.arange(first, first + len(self._ctrl_index)))
+        self._ctrl_view = data.ctrl[first:first + len(self._ctrl_index)] if contiguous else None
+        #: (mocap position, mocap quaternion): views of the mocap body's rows of MjData
+        self.mocap_views = (data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id])
+        self._model = physics.model.ptr
 
     def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
@@ -470,8 +495,10 @@ class OpenDEnvironment(composer.Environment):
         return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount, obs)
 
 
-def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
-    """``n`` quaternions (n, 4) from ``q`` toward ``target``, the k-th at most k * step_angle away.
+def _slerp_path(q, target, step_angle: float, n: int) -> tuple[np.ndarray, int]:
+    """``n`` quaternions (n, 4) from ``q`` toward ``target``, the k-th at most k * step_angle away,
+    and how many rows differ from the last: the rows from the first that reaches the target on are
+    the same numbers (computed once, repeated).
 
     Runs on most control steps (the planner turns the hand as a door swings), so it is plain float
     arithmetic: for 4-vectors that is about twice as fast as numpy.
@@ -487,7 +514,7 @@ def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
         t0, t1, t2, t3, dot = -t0, -t1, -t2, -t3, -dot
     angle = 2 * math.acos(min(1.0, dot))
     if angle < 1e-9:
-        return np.tile((t0, t1, t2, t3), (n, 1))
+        return np.tile((t0, t1, t2, t3), (n, 1)), 1
     half = angle / 2
     sin_half = math.sin(half)
     rows = []
@@ -497,7 +524,10 @@ def _slerp_path(q, target, step_angle: float, n: int) -> np.ndarray:
         x0, x1, x2, x3 = a * q0 + b * t0, a * q1 + b * t1, a * q2 + b * t2, a * q3 + b * t3
         norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3)
         rows.append((x0 / norm, x1 / norm, x2 / norm, x3 / norm))
-    return np.array(rows)
+        if t == 1.0:  # every later k gives t = 1 again: the same inputs, the same row
+            rows.extend([rows[-1]] * (n - k))
+            return np.array(rows), k
+    return np.array(rows), n
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,

@@ -2,38 +2,58 @@
 
 ``gym.make_vec("opend/OpenCabinet-v0", num_envs=N, cabinets=...)`` builds `OpenDVectorEnv`: one
 worker process per environment (``spawn``: a GL context does not survive ``fork``), each running an
-`OpenDCore`. Per step the main process writes the actions into a shared array and sends each worker
-one byte; the worker steps, writes its float observation vector (float32), images, reward, flags
-and the numeric info into shared arrays, and answers with an empty message. Nothing is pickled per
-step: only at an episode's start (its instruction, cabinet, target, room, seed) and on a physics
-warning. gymnasium's ``AsyncVectorEnv`` instead pickles every step's info dict and merges it key by
-key in the main process, which made two processes slower than one.
+`OpenDCore`. Per step the main process writes the actions into a shared array and writes one byte
+into each worker's command pipe; the worker steps, writes its float observation vector (float32),
+images, reward, flags and the numeric info into shared arrays, and answers with one byte on its
+answer pipe (plain ``os.write`` / ``os.read`` of a byte: no message framing, no pickling, no Python
+object per step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
+physics warning and on an error does the answer byte say that a pickled message waits on the
+worker's control connection. gymnasium's ``AsyncVectorEnv`` instead pickles every step's info dict
+and merges it key by key in the main process (about four times the main process's CPU per step).
 
 Semantics are gymnasium's defaults: ``reset(seed=s)`` seeds environment i with ``s + i`` (the
 episode ``gym.make(...).reset(seed=s + i)`` gives); an environment whose episode ended is reset on
 the next ``step`` (autoreset "next step"), which returns its first observation with reward 0.
-Observations are fresh copies. Text instructions (``instruction="text"``) cannot live in shared
-memory: use the one-hot code, or ``vectorization_mode="async"``.
+Observations and the step's info arrays are fresh copies; the info's episode columns
+(instruction, cabinet, target, ...) and its masks are read-only arrays shared between steps. Text
+instructions (``instruction="text"``) cannot live in shared memory: use the one-hot code, or
+``vectorization_mode="async"``.
+
+``gym.make_vec(..., step_in_main=True)`` steps environment 0 in the main process while the workers
+step the others (see `OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
+CPU time (for benchmarks).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import pickle
+import time
 import traceback
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-#: Numeric info per step (float64 in shared memory) and the reward terms' fields.
-_INFO_KEYS = ("success", "open_ratio", "others_moved", "sim_time")
+#: Numeric info per step: floats and flags (each in a shared array of its dtype), and the reward
+#: terms' fields split the same way.
+_INFO_FLOATS, _INFO_FLAGS = ("open_ratio", "sim_time"), ("success", "others_moved")
+_INFO_KEYS = ("success", "open_ratio", "others_moved", "sim_time")  # the info dict's order
 _TERM_KEYS = ("distance", "start_distance", "contact", "open_ratio", "others_range", "success", "others_moved",
               "reach", "open", "others", "range_ratio")
-_BOOL_KEYS = {"success", "others_moved", "contact"}
+_TERM_FLAGS = ("contact", "success", "others_moved")
+_TERM_FLOATS = tuple(k for k in _TERM_KEYS if k not in _TERM_FLAGS)
+#: (key, its mask's key, whether a flag, column) per info key and per reward term, in dict order
+_INFO_PLAN = [(k, "_" + k, k in _INFO_FLAGS, (_INFO_FLAGS if k in _INFO_FLAGS else _INFO_FLOATS).index(k))
+              for k in _INFO_KEYS]
+_TERM_PLAN = [(k, "_" + k, k in _TERM_FLAGS, (_TERM_FLAGS if k in _TERM_FLAGS else _TERM_FLOATS).index(k))
+              for k in _TERM_KEYS]
 #: Strings and integers that change only when an episode starts (sent through the pipe then).
 _EPISODE_KEYS = ("instruction", "cabinet", "target", "target_type", "room", "episode_seed")
-_STEP, _RESET, _CLOSE = b"s", b"r", b"c"
+#: Command bytes (main -> worker) and answer bytes (worker -> main).
+_STEP, _RESET, _CPU, _CLOSE = b"s", b"r", b"t", b"c"
+_DONE, _MESSAGE, _ERROR = b".", b"m", b"E"
 
 
 class _Shared:
@@ -52,81 +72,121 @@ class _Shared:
         self.arrays.clear()
 
 
-def _worker(index: int, kwargs: dict, specs: dict, raw: dict, pipe) -> None:
-    """One environment: steps on a one-byte command, writes its results into row ``index``."""
-    from gymnasium.utils import seeding
+class _Runner:
+    """One environment writing its results into row ``index`` of the shared arrays (in a worker
+    process, or for ``step_in_main`` in the main process)."""
 
-    from opend_mj.sim.envs import OpenDCore, make_config
+    def __init__(self, index: int, kwargs: dict, arrays: dict):
+        from gymnasium.utils import seeding
 
+        from opend_mj.sim.envs import OpenDCore, make_config
+
+        self._seeding = seeding
+        self.core = OpenDCore(make_config(**kwargs))
+        self.rng, _ = seeding.np_random(None)
+        self.done = True
+        a = arrays
+        # this environment's rows of the shared arrays
+        self.flat, self.actions = a["flat"][index], a["actions"][index]
+        self.reward, self.terminated = a["reward"][index:index + 1], a["terminated"][index:index + 1]
+        self.truncated = a["truncated"][index:index + 1]
+        self.info_floats, self.info_flags = a["info_floats"][index], a["info_flags"][index]
+        self.term_floats, self.term_flags = a["term_floats"][index], a["term_flags"][index]
+        self.images = {key: a[key][index] for key in ("rgb", "depth") if key in a}
+
+    def _write(self, images: dict, reward: float, terminated: bool, truncated: bool, info: dict) -> None:
+        np.copyto(self.flat, self.core.flat, casting="same_kind")
+        for key, image in images.items():
+            self.images[key][...] = image
+        self.reward[0], self.terminated[0], self.truncated[0] = reward, terminated, truncated
+        self.info_floats[:] = [info[k] for k in _INFO_FLOATS]
+        self.info_flags[:] = [info[k] for k in _INFO_FLAGS]
+        terms = info["reward_terms"]
+        self.term_floats[:] = [terms[k] for k in _TERM_FLOATS]
+        self.term_flags[:] = [terms[k] for k in _TERM_FLAGS]
+
+    def reset(self, seed, options) -> bytes:
+        """Start an episode (seeded, or the next of this environment's seed sequence); returns the
+        pickled episode message."""
+        if seed is not None:
+            self.rng, _ = self._seeding.np_random(int(seed))
+            episode_seed = int(seed)
+        else:
+            episode_seed = int(self.rng.integers(2**31 - 1))
+        obs, info = self.core.reset(episode_seed, options)
+        self._write({k: obs[k] for k in ("rgb", "depth") if k in obs}, 0.0, False, False, info)
+        self.done = False
+        return pickle.dumps({k: info[k] for k in _EPISODE_KEYS})
+
+    def step(self) -> bytes | None:
+        """Step with the shared actions row (or reset an ended episode); None, or the pickled
+        message (an episode start or physics warnings)."""
+        if self.done:
+            return self.reset(None, None)
+        _, reward, terminated, truncated, info = self.core.step(self.actions, observe=False)
+        self._write(self.core.images(), reward, terminated, truncated, info)
+        self.done = terminated or truncated
+        warnings = info.get("physics_warnings")
+        return pickle.dumps({"physics_warnings": warnings}) if warnings else None
+
+    def close(self) -> None:
+        self.core.close()
+
+
+def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
+    """One environment in a worker process: steps on a command byte, answers with one byte."""
     shared = _Shared(specs, raw=raw)
-    a = shared.arrays
+    command_fd, answer_fd = commands.fileno(), answers.fileno()
+    runner = None
+
+    def answer(message: bytes | None = None) -> None:
+        if message is None:
+            os.write(answer_fd, _DONE)
+        else:  # the message first: the main process reads it when the answer byte says so
+            control.send_bytes(message)
+            os.write(answer_fd, _MESSAGE)
+
     try:
-        core = OpenDCore(make_config(**kwargs))
-        rng, _ = seeding.np_random(None)
-        done = True
-
-        def write(obs_images: dict, reward: float, terminated: bool, truncated: bool, info: dict) -> None:
-            np.copyto(a["flat"][index], core.flat, casting="same_kind")
-            for key, image in obs_images.items():
-                a[key][index] = image
-            a["reward"][index] = reward
-            a["terminated"][index] = terminated
-            a["truncated"][index] = truncated
-            a["info"][index] = [float(info[k]) for k in _INFO_KEYS]
-            terms = info["reward_terms"]
-            a["terms"][index] = [float(terms[k]) for k in _TERM_KEYS]
-
-        def reset(seed, options) -> bytes:
-            nonlocal rng, done
-            if seed is not None:
-                rng, _ = seeding.np_random(int(seed))
-                episode_seed = int(seed)
-            else:
-                episode_seed = int(rng.integers(2**31 - 1))
-            obs, info = core.reset(episode_seed, options)
-            write({k: obs[k] for k in ("rgb", "depth") if k in obs}, 0.0, False, False, info)
-            done = False
-            return pickle.dumps({k: info[k] for k in _EPISODE_KEYS})
-
-        pipe.send_bytes(b"ok")
+        runner = _Runner(index, kwargs, shared.arrays)
+        answer()  # ready
         while True:
-            message = pipe.recv_bytes()
-            command = message[:1]
+            command = os.read(command_fd, 1)
             if command == _STEP:
-                if done:
-                    pipe.send_bytes(reset(None, None))
-                    continue
-                _, reward, terminated, truncated, info = core.step(a["actions"][index], observe=False)
-                write(core.images(), reward, terminated, truncated, info)
-                done = terminated or truncated
-                warnings = info.get("physics_warnings")
-                pipe.send_bytes(pickle.dumps({"physics_warnings": warnings}) if warnings else b"")
+                answer(runner.step())
             elif command == _RESET:
-                seed, options = pickle.loads(message[1:])
-                pipe.send_bytes(reset(seed, options))
-            elif command == _CLOSE:
+                answer(runner.reset(*pickle.loads(control.recv_bytes())))
+            elif command == _CPU:
+                answer(pickle.dumps({"cpu_seconds": time.process_time()}))
+            else:  # _CLOSE, or b"" when the main process is gone
                 break
     except Exception:  # noqa: BLE001 (reported to the main process, which raises it)
         try:
-            pipe.send_bytes(b"E" + traceback.format_exc().encode())
+            control.send_bytes(traceback.format_exc().encode())
+            os.write(answer_fd, _ERROR)
         except (BrokenPipeError, OSError):
             pass
     finally:
-        if "core" in locals():
-            core.close()
+        if runner is not None:
+            runner.close()
         shared.close()
-        pipe.close()
+        for connection in (commands, answers, control):
+            connection.close()
 
 
 class OpenDVectorEnv(VectorEnv):
     """``num_envs`` environments over the dataset in worker processes with shared-memory results.
 
-    Keyword arguments: those of ``gym.make("opend/OpenCabinet-v0", ...)`` (`EnvConfig`'s fields).
+    Keyword arguments: those of ``gym.make("opend/OpenCabinet-v0", ...)`` (`EnvConfig`'s fields),
+    and ``step_in_main``: True runs environment 0 in this process, between handing the step to the
+    workers and collecting their answers (``num_envs - 1`` worker processes): the main process
+    steps an environment instead of sleeping, and waits for one fewer answer. Where there are no
+    more free cores than environments (e.g. 2 environments on 2 cores) this is the faster choice;
+    where a learner in the main process needs its core, leave it False.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 2, **kwargs):
+    def __init__(self, num_envs: int = 2, step_in_main: bool = False, **kwargs):
         from opend_mj.sim.envs import OpenDCore, make_config
         from opend_mj.sim.spaces import action_space, observation_space
 
@@ -148,84 +208,116 @@ class OpenDVectorEnv(VectorEnv):
                       if k in self.single_observation_space.spaces}
         finally:
             core.close()
-        self.num_envs = int(num_envs)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._layout = layout
-        n = self.num_envs
+        self.num_envs = n = int(num_envs)
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self.action_space = batch_space(self.single_action_space, n)
+        floats = {key: (sl, shape) for key, sl, shape in layout}
+        #: (key, columns of the float vector, batched shape or None where the columns are it)
+        self._obs_plan = [(key, floats[key][0], None if len(floats[key][1]) == 1 else (n, *floats[key][1]))
+                          if key in floats else (key, None, None) for key in self.single_observation_space.spaces]
         specs = {"flat": ((n, flat_size), np.float32), "actions": ((n, *self.single_action_space.shape), np.float64),
                  "reward": ((n,), np.float64), "terminated": ((n,), np.bool_), "truncated": ((n,), np.bool_),
-                 "info": ((n, len(_INFO_KEYS)), np.float64), "terms": ((n, len(_TERM_KEYS)), np.float64)}
+                 "info_floats": ((n, len(_INFO_FLOATS)), np.float64), "info_flags": ((n, len(_INFO_FLAGS)), np.bool_),
+                 "term_floats": ((n, len(_TERM_FLOATS)), np.float64), "term_flags": ((n, len(_TERM_FLAGS)), np.bool_)}
         for key, space in images.items():
             specs[key] = ((n, *space.shape), space.dtype)
-        self._images = tuple(images)
         context = mp.get_context("spawn")
         self._shared = _Shared(specs, context)
+        self._arrays = self._shared.arrays
         self._episode = [dict.fromkeys(_EPISODE_KEYS) for _ in range(n)]
+        self._episode_columns: dict | None = None
+        self._all = np.ones(n, dtype=bool)  # the info masks: every environment reports every key
+        self._all.flags.writeable = False
         self._closed_workers = False
-        self._pipes, self._processes = [], []
+        self._controls, self._processes, self._command_fds, self._answer_fds, self._ends = [], [], [], [], []
+        self._local: _Runner | None = None
+        #: index of the first environment in a worker process (1 when environment 0 steps here)
+        self._offset = 1 if step_in_main else 0
         try:
-            for i in range(n):
-                parent, child = context.Pipe()
-                proc = context.Process(target=_worker, args=(i, dict(kwargs), specs, self._shared.raw, child),
-                                       name=f"opend-vector-{i}", daemon=True)
+            for i in range(self._offset, n):
+                command_r, command_w = context.Pipe(duplex=False)
+                answer_r, answer_w = context.Pipe(duplex=False)
+                control, child_control = context.Pipe()
+                proc = context.Process(target=_worker, name=f"opend-vector-{i}", daemon=True,
+                                       args=(i, dict(kwargs), specs, self._shared.raw, command_r, answer_w,
+                                             child_control))
                 proc.start()
-                child.close()
-                self._pipes.append(parent)
+                for child_end in (command_r, answer_w, child_control):
+                    child_end.close()
+                self._ends += [command_w, answer_r]
+                self._command_fds.append(command_w.fileno())
+                self._answer_fds.append(answer_r.fileno())
+                self._controls.append(control)
                 self._processes.append(proc)
-            for i in range(n):
-                self._receive(i)
+            if step_in_main:
+                self._local = _Runner(0, dict(kwargs), self._arrays)
+            for j in range(len(self._processes)):
+                self._answer(j)
         except BaseException:
             self.close_extras()
             raise
 
     # ------------------------------------------------------------------ plumbing
-    def _receive(self, i: int) -> bytes:
+    def _answer(self, j: int) -> bytes | None:
+        """Worker j's answer (environment ``j + offset``): None for a plain step, else its message
+        (raises on a worker's error)."""
         try:
-            message = self._pipes[i].recv_bytes()
-        except EOFError:
-            raise RuntimeError(f"worker {i} of the vector environment died") from None
-        if message[:1] == b"E":
-            raise RuntimeError(f"worker {i} of the vector environment failed:\n{message[1:].decode()}")
-        return message
+            byte = os.read(self._answer_fds[j], 1)
+        except OSError:
+            byte = b""
+        if byte == _DONE:
+            return None
+        if byte == _MESSAGE:
+            return self._controls[j].recv_bytes()
+        where = f"worker {j} (environment {j + self._offset}) of the vector environment"
+        if byte == _ERROR:
+            raise RuntimeError(f"{where} failed:\n{self._controls[j].recv_bytes().decode()}")
+        raise RuntimeError(f"{where} died")
 
-    def _episode_message(self, i: int, message: bytes) -> list | None:
-        """Apply a worker's message (episode start or physics warnings); return the warnings."""
-        if not message or message == b"ok":
+    def _apply(self, i: int, message: bytes | None) -> list | None:
+        """Apply a worker's message (an episode start or physics warnings); return the warnings."""
+        if message is None:
             return None
         data = pickle.loads(message)
         if "physics_warnings" in data:
             return data["physics_warnings"]
         self._episode[i] = data
+        self._episode_columns = None
         return None
 
     def _observations(self) -> dict:
-        a = self._shared.arrays
+        a = self._arrays
         flat = a["flat"].copy()
-        n = self.num_envs
-        obs = {key: flat[:, sl].reshape(n, *shape) for key, sl, shape in self._layout}
-        for key in self._images:
-            obs[key] = a[key].copy()
-        return {key: obs[key] for key in self.single_observation_space.spaces}
+        obs = {}
+        for key, columns, shape in self._obs_plan:
+            if columns is None:
+                obs[key] = a[key].copy()
+            elif shape is None:
+                obs[key] = flat[:, columns]
+            else:
+                obs[key] = flat[:, columns].reshape(shape)
+        return obs
 
     def _infos(self, warnings: dict[int, list]) -> dict:
-        a, n = self._shared.arrays, self.num_envs
-        mask = np.ones(n, dtype=bool)
-        info = {}
-        values = a["info"].copy()
-        for j, key in enumerate(_INFO_KEYS):
-            info[key] = values[:, j].astype(bool) if key in _BOOL_KEYS else values[:, j]
-            info[f"_{key}"] = mask
-        terms = a["terms"].copy()
-        info["reward_terms"] = {}
-        for j, key in enumerate(_TERM_KEYS):
-            info["reward_terms"][key] = terms[:, j].astype(bool) if key in _BOOL_KEYS else terms[:, j]
-            info["reward_terms"][f"_{key}"] = mask
-        info["_reward_terms"] = mask
-        for key in _EPISODE_KEYS:
-            column = np.array([e[key] for e in self._episode], dtype=object if key not in ("room", "episode_seed")
-                              else np.int64)
-            info[key], info[f"_{key}"] = column, mask
+        a, n = self._arrays, self.num_envs
+        mask = self._all  # read-only, the same array every step
+        # one copy per shared array, transposed: each key is then a contiguous row of it
+        columns = ((a["info_floats"].T.copy(), a["info_flags"].T.copy()),
+                   (a["term_floats"].T.copy(), a["term_flags"].T.copy()))
+        info, terms = {}, {}
+        for out, plan, (floats, flags) in ((info, _INFO_PLAN, columns[0]), (terms, _TERM_PLAN, columns[1])):
+            for key, mask_key, flag, j in plan:
+                out[key], out[mask_key] = (flags if flag else floats)[j], mask
+        info["reward_terms"], info["_reward_terms"] = terms, mask
+        if self._episode_columns is None:  # an episode started: its strings and integers as columns
+            self._episode_columns = {}
+            for key in _EPISODE_KEYS:
+                column = np.array([e[key] for e in self._episode],
+                                  dtype=np.int64 if key in ("room", "episode_seed") else object)
+                column.flags.writeable = False  # handed out until the next episode starts
+                self._episode_columns[key] = column
+        for key, column in self._episode_columns.items():
+            info[key], info["_" + key] = column, mask
         if warnings:
             column = np.empty(n, dtype=object)
             for i, w in warnings.items():
@@ -242,38 +334,61 @@ class OpenDVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
-        for i, s in enumerate(seeds):
-            self._pipes[i].send_bytes(_RESET + pickle.dumps((s, options)))
-        for i in range(self.num_envs):
-            self._episode_message(i, self._receive(i))
+        offset = self._offset
+        for j, s in enumerate(seeds[offset:]):
+            self._controls[j].send_bytes(pickle.dumps((s, options)))
+            os.write(self._command_fds[j], _RESET)
+        if self._local is not None:
+            self._apply(0, self._local.reset(seeds[0], options))
+        for j in range(len(self._processes)):
+            self._apply(j + offset, self._answer(j))
         return self._observations(), self._infos({})
 
     def step(self, actions):
-        a = self._shared.arrays
-        a["actions"][:] = np.asarray(actions, dtype=np.float64).reshape(a["actions"].shape)
-        for pipe in self._pipes:
-            pipe.send_bytes(_STEP)
+        a = self._arrays
+        target = a["actions"]
+        actions = np.asarray(actions)
+        target[...] = actions if actions.shape == target.shape else actions.reshape(target.shape)
+        for fd in self._command_fds:
+            os.write(fd, _STEP)
         warnings = {}
-        for i in range(self.num_envs):
-            w = self._episode_message(i, self._receive(i))
+        if self._local is not None:  # environment 0 steps here while the workers step theirs
+            w = self._apply(0, self._local.step())
             if w:
-                warnings[i] = w
+                warnings[0] = w
+        for j in range(len(self._processes)):
+            message = self._answer(j)
+            if message is not None:
+                w = self._apply(j + self._offset, message)
+                if w:
+                    warnings[j + self._offset] = w
         return (self._observations(), a["reward"].copy(), a["terminated"].copy(), a["truncated"].copy(),
                 self._infos(warnings))
+
+    def worker_cpu_seconds(self) -> list[float]:
+        """CPU seconds (user + system) each worker process has used so far (not this process's:
+        with ``step_in_main`` environment 0's steps are in ``time.process_time()`` here)."""
+        for fd in self._command_fds:
+            os.write(fd, _CPU)
+        return [pickle.loads(self._answer(j))["cpu_seconds"] for j in range(len(self._processes))]
 
     def close_extras(self, **kwargs) -> None:
         if self._closed_workers:
             return
         self._closed_workers = True
-        for pipe, proc in zip(self._pipes, self._processes):
+        for fd, proc in zip(self._command_fds, self._processes):
             try:
                 if proc.is_alive():
-                    pipe.send_bytes(_CLOSE)
-            except (BrokenPipeError, OSError):
+                    os.write(fd, _CLOSE)
+            except OSError:
                 pass
-        for pipe, proc in zip(self._pipes, self._processes):
+        for proc in self._processes:
             proc.join(timeout=10)
             if proc.is_alive():
                 proc.terminate()
-            pipe.close()
+        for connection in self._ends + self._controls:
+            connection.close()
+        if self._local is not None:
+            self._local.close()
+            self._local = None
         self._shared.close()

@@ -9,7 +9,7 @@ from opend_mj.assets.layout import PARTNET_SCALE
 
 
 #: Bumped whenever the generated geometry changes.
-GENERATOR_VERSION = "4"
+GENERATOR_VERSION = "5"
 
 HANDLE_KINDS = ("bar", "arched", "knob")
 
@@ -47,6 +47,8 @@ class GeneratorConfig:
     #: Share of straight bars that run most of their panel (long door pulls, full-width drawer bars).
     long_bar_share: float = 0.35
     long_bar_max: float = 0.80
+    #: A long bar's length between this fraction of its longest and the longest (version 4: 0).
+    long_bar_min_frac: float = 0.6
     short_bar_min: float = 0.05
     #: Wide drawers (front wider than ``paired_pull_min_width``) carry two pulls, one per half, this often.
     paired_pull_share: float = 0.35
@@ -62,6 +64,21 @@ class GeneratorConfig:
     door_bar_top_share: float = 0.72
     door_bar_centred_share: float = 0.5
     door_bar_edge_range: tuple[float, float] = (0.03, 0.06)
+    #: Flaps: doors hinged about a horizontal axis along their top edge (they lift up) or bottom edge
+    #: (they drop down), each with a horizontal bar along its free edge. The real OpenD training
+    #: cabinets: 18 of 144 doors in 10 cabinets, 8 hinged at the top and 10 at the bottom, opening
+    #: 90-114 degrees, side by side in pairs in 4 of them. ``flap_share`` is the share of cabinets with
+    #: doors whose doors are all flaps; drawn from a random stream of its own (version 5).
+    flap_share: float = 0.25
+    #: Doors taller than this (m) stay side-hinged (the real flaps are 0.25-0.91 m tall).
+    flap_max_height: float = 0.95
+    flap_top_share: float = 0.45
+    flap_top_range: tuple[float, float] = (1.57, 1.75)
+    flap_bottom_range: tuple[float, float] = (1.57, 1.75)
+    #: A horizontal door bar not centred across its door ends this far (m) from the door's free edge;
+    #: on double doors and flap pairs the two pulls stand side by side (the real 10th percentile of the
+    #: free space from a handle to the nearest other one is 5 mm). Version 4 kept 25 mm.
+    door_bar_end_margin_range: tuple[float, float] = (0.004, 0.025)
     #: How a cabinet meets the floor, as shares of (bottom fronts down to the floor, fronts inset above
     #: the bottom panel, a low plinth in ``low_plinth_range``, a plinth or legs in ``plinth_range``).
     #: Matched to the real OpenD training cabinets' lowest moving part above the floor (the feasibility

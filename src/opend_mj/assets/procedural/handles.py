@@ -148,7 +148,10 @@ def make_handle(rng: np.random.Generator, cfg: GeneratorConfig, st: HandleStyle,
         max_len = min(0.30, room, 0.7 * along)
     min_len = 0.10 if kind == "arched" else cfg.short_bar_min
     max_len = max(min_len, max_len)
-    length = min_len + st.length_frac * (max_len - min_len)
+    # a long bar runs most of its panel (real long pulls span 60-95 % of it); others anywhere in range
+    frac = cfg.long_bar_min_frac + (1 - cfg.long_bar_min_frac) * st.length_frac if kind == "bar" and st.long \
+        else st.length_frac
+    length = min_len + frac * (max_len - min_len)
     u = np.array([1.0, 0.0, 0.0]) if orient == "horizontal" else np.array([0.0, 1.0, 0.0])
     # keep the handle inside the panel
     lo_c = panel_lo[:2] + margin + (u[:2] * length / 2)

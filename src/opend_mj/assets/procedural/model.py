@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from opend_mj.assets.procedural.config import GeneratorConfig
-from opend_mj.assets.procedural.handles import handle_style, make_handle
+from opend_mj.assets.procedural.handles import HandleStyle, handle_style, make_handle
 from opend_mj.assets.procedural.layouts import Layout, Leaf, sample_layout
 from opend_mj.assets.procedural.materials import HANDLE_FINISHES, PALETTES, Material, pick_colour
 from opend_mj.assets.procedural.pieces import Box, Piece, bounds_of, translate_piece
@@ -40,11 +41,13 @@ class Target:
 
 
 def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, t: float, plinth: float,
-                colours: dict, floor_fronts: bool = False) -> tuple[list[Visual], list[Target]]:
+                colours: dict, floor_fronts: bool = False,
+                doors_rng: np.random.Generator | None = None) -> tuple[list[Visual], list[Target]]:
     """Carcass visuals and movable targets of a layout (metres, mesh frame).
 
     ``floor_fronts``: the bottom row's doors and drawer fronts reach down to the floor (the bottom panel
-    stands back behind them), as on many real cabinets without a plinth."""
+    stands back behind them), as on many real cabinets without a plinth. ``doors_rng``: the random
+    stream of the doors' version 5 draws (flaps, where a bar ends); None draws neither (version 4)."""
     W, H, D = layout.width, layout.height, layout.depth
     g = cfg.clearance
     body = Material("body", colours["body"])
@@ -117,6 +120,12 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
     door_bar_top = bool(rng.random() < cfg.door_bar_top_share)
     door_bar_centred = bool(rng.random() < cfg.door_bar_centred_share)
     door_bar_edge = float(rng.uniform(*cfg.door_bar_edge_range))
+    flap, flap_upper, bar_end_margin = None, door_upper, 0.025
+    if doors_rng is not None:
+        if doors_rng.random() < cfg.flap_share:
+            flap = "top" if doors_rng.random() < cfg.flap_top_share else "bottom"
+        flap_upper = float(doors_rng.uniform(*(cfg.flap_top_range if flap == "top" else cfg.flap_bottom_range)))
+        bar_end_margin = float(doors_rng.uniform(*cfg.door_bar_end_margin_range))
     floor_y = y0
     bottom_row = y0 + plinth + t  # lower edge of the cells of the bottom row
 
@@ -174,6 +183,11 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
             lo = np.array([lx0, front_y0, zf - t_front])
             hi = np.array([lx1, cy1 - g, zf])
             door_h = hi[1] - lo[1]
+            if flap is not None and door_h <= cfg.flap_max_height:
+                targets.append(_flap(rng, cfg, lo, hi, flap if lo[1] > floor_y + 1e-9 else "top", flap_upper,
+                                     door_style, door_bar_edge, bar_end_margin, hinge, leaf.kind == "double_door",
+                                     lo[1] - floor_y, front, handle_mat))
+                continue
             # handle near the free edge; near the top of low doors, around 1 m up on tall doors
             free_x = lx1 if hinge == "left" else lx0
             inward = -1.0 if hinge == "left" else 1.0
@@ -194,7 +208,7 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
             pieces, kind, orient = make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
             if orient == "horizontal" and not door_bar_centred:  # its real length, from near the free edge
                 bl, bh = bounds_of(pieces)
-                shift = (free_x + inward * 0.025) - (bh[0] if hinge == "left" else bl[0])
+                shift = (free_x + inward * bar_end_margin) - (bh[0] if hinge == "left" else bl[0])
                 pieces = [translate_piece(p, (shift, 0.0, 0.0)) for p in pieces]
             hinge_x = lx0 if hinge == "left" else lx1
             axis = (0.0, -1.0, 0.0) if hinge == "left" else (0.0, 1.0, 0.0)
@@ -208,6 +222,36 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
         hl, hh = bounds_of(tg.visuals[-1].pieces)
         tg.handle_center = tuple(float(v) for v in (hl + hh) / 2)
     return carcass, targets
+
+
+def _flap(rng: np.random.Generator, cfg: GeneratorConfig, lo: np.ndarray, hi: np.ndarray, edge: str,
+          upper: float, style: HandleStyle, bar_edge: float, end_margin: float, side: str, double: bool,
+          hinge_height: float, front: Material, handle_mat: Material) -> Target:
+    """A door hinged about a horizontal axis along its ``edge`` ("top": it lifts up; "bottom": it drops
+    down), with a horizontal bar along its free edge: centred on a single flap, from near the meeting
+    edge on a pair (``side``: the leaf's hinge side as a double door, i.e. where its free edge is).
+
+    A flap hinged at its bottom edge passes below its hinge beyond 90 degrees; its range keeps the free
+    edge 1 cm above the floor (``hinge_height``, m, is the hinge's height above the floor)."""
+    door_h = float(hi[1] - lo[1])
+    if edge == "bottom":
+        upper = min(upper, math.pi / 2 + max(0.0, hinge_height - 0.01) / door_h)
+    st = replace(style, orientation="horizontal", kind="bar" if style.kind == "knob" else style.kind)
+    hy = float(hi[1] - bar_edge) if edge == "bottom" else float(lo[1] + bar_edge)
+    hx = float((lo[0] + hi[0]) / 2)
+    pieces, kind, orient = make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
+    if double and orient == "horizontal":  # side by side: the bar ends near the pair's meeting edge
+        free_x, inward = (float(hi[0]), -1.0) if side == "left" else (float(lo[0]), 1.0)
+        bl, bh = bounds_of(pieces)
+        shift = (free_x + inward * end_margin) - (bh[0] if side == "left" else bl[0])
+        pieces = [translate_piece(p, (shift, 0.0, 0.0)) for p in pieces]
+    # a positive angle swings the free edge out of the front (+z) about the hinge line on the front face
+    axis = (1.0, 0.0, 0.0) if edge == "bottom" else (-1.0, 0.0, 0.0)
+    origin = (hx, float(lo[1] if edge == "bottom" else hi[1]), float(hi[2]))
+    return Target("door", "revolute", axis, origin, float(upper),
+                  [Visual("cabinet_door_surface", [Box(tuple(lo), tuple(hi))], front),
+                   Visual("handle", pieces, handle_mat)],
+                  hinge=edge, double=double, handle_kind=kind, handle_orientation=orient)
 
 
 def unshare_vertices(visuals: list[Visual]) -> list[Visual]:
@@ -279,6 +323,7 @@ def sample_cabinet(index: int, seed: int, config: GeneratorConfig = GeneratorCon
         finish = list(HANDLE_FINISHES)[rng.integers(len(HANDLE_FINISHES))]
         handle = HANDLE_FINISHES[finish]
     colours = {"body": body, "front": front, "interior": interior, "handle": handle}
-    carcass, targets = build_parts(rng, cfg, layout, t, plinth, colours, floor_fronts=base == "floor_fronts")
+    carcass, targets = build_parts(rng, cfg, layout, t, plinth, colours, floor_fronts=base == "floor_fronts",
+                                   doors_rng=np.random.default_rng([seed, index, 5]))
     return SampledCabinet(f"proc_{index:04d}", int(seed), int(index), t, plinth, base, layout, finish, carcass,
                           targets)

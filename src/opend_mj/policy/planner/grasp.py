@@ -15,9 +15,17 @@ import numpy as np
 
 from opend_mj.language import hinge_side
 from opend_mj.policy.perception import door_edges, infer_hinge_side
+from opend_mj.policy.planner.clearance import clearances, outline_for
 from opend_mj.policy.planner.records import GraspChoice, Observation, PlanResult, PullState
 from opend_mj.sim.hands import orientation_for_handle
-from opend_mj.transforms import axis_angle_quat, quat_axis_z, quat_mul, yaw_quat
+from opend_mj.transforms import axis_angle_quat, quat_axis_z, quat_mul, quat_to_mat, yaw_quat
+
+class _Events:
+    """Where a pose's events go: a PlanResult's list, or a list that is dropped."""
+
+    def __init__(self, events: list):
+        self.events = events
+
 
 #: the grasp-depth key of each style (``GraspConfig.depth[style]`` wins where it has one)
 STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
@@ -35,36 +43,117 @@ class GraspGeometry:
 
     def choose_grasp(self, handle, shape, obs: Observation, result: PlanResult) -> GraspChoice:
         """Orientation from the handle and the instruction; style from the measured shape; the site
-        at the handle (lifted, pitched or raised for a handle near the floor, per hand)."""
+        at the handle (lifted, pitched or raised for a handle near the floor, per hand). A knob
+        whose pose would put the open hand into the floor or the door is taken with the hand
+        turned a quarter about the approach axis where that pose has more room (:meth:`clears`)."""
         cfg = self.config.grasp
         door = result.target_kind == "door"
         orientation = handle.orientation
         if handle.kind == "knob":
             orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
+        side = self.hinge_side(handle, obs) if door else None
+        self.state.hinge = self.hinge_from_depth(handle, side, obs, result) if door else None
+        style = self.grasp_style(handle, shape)
+        depth = float(cfg.depth.get(style, cfg.depth.get(STYLE_KIND[style], 0.0)))
+        centre = handle.centre + np.array([depth, 0.0, 0.0])
+        quat, pos, pre, level = self._pose(orientation, handle, shape, door, side, centre, result.events)
+        clear = self.clears(handle, shape, quat, pos, pre)
+        if clear is not None and not clear[0] and handle.kind == "knob" and self.hand.clearance_knob_turn:
+            other = "vertical" if orientation == "horizontal" else "horizontal"
+            q, p, f, lv = self._pose(other, handle, shape, door, side, centre, [])
+            # the fingers either way round (a knob has no side to favour); the first on a tie
+            options = [(q, p, f, lv), (quat_mul(q, yaw_quat(math.pi)), p, f, quat_mul(lv, yaw_quat(math.pi)))]
+            rooms = [self.clears(handle, shape, *o[:3]) for o in options]
+            best = max(range(2), key=lambda i: (min(rooms[i][1:]), -i))
+            if min(rooms[best][1:]) > min(clear[1:]):  # a knob is round: turned a quarter, it holds it as well
+                result.events.append({"knob_turned": [other, *clear[1:], *rooms[best][1:]]})
+                orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
+        if clear is not None and not clear[0] and orientation == "horizontal":
+            quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
+        if style == "hook" and door and self.hand.hook_slide:
+            # a door's bar at the fingers' middle segments, where their curl closes behind it (at the
+            # proximal ones the tips curl past a thin bar onto the panel, and the bar slips out as the
+            # door turns; a drawer's straight pull holds a bar anywhere in the curl); a site already
+            # moved back along the fingers (a low handle's lift) moves only the rest of the way
+            fingers = quat_to_mat(quat)[:, 1]
+            along = float((pos - centre) @ fingers)
+            slide = max(0.0, along + self.hand.hook_slide)
+            side = self._side_toward(-fingers)
+            if side in ("left", "right") and shape.clear[side] < cfg.neighbour_clear:
+                # not toward a neighbour beside a vertical bar (a double door's other handle 5-8 cm
+                # away): the hand would push that door
+                result.events.append({"hook_slide_blocked": [side, shape.clear[side]]})
+                slide = 0.0
+            if slide > 0.0:
+                pos = pos - slide * fingers
+                result.events.append({"hook_slide": round(slide, 4)})
+        grasp = GraspChoice(style, orientation, quat, pos, pre, self.closed_profile(orientation))
+        self.state.first_pos = pos.copy()
+        result.events.append({"grasp": grasp.to_dict()})
+        return grasp
+
+    @staticmethod
+    def _side_toward(direction) -> str:
+        """The side of the handle ("left" = +y, "right" = -y, "up", "down") a world direction mostly
+        points to (the sides of the handle's measured ``clear`` space)."""
+        d = np.asarray(direction, float)
+        if abs(d[1]) >= abs(d[2]):
+            return "left" if d[1] > 0 else "right"
+        return "up" if d[2] > 0 else "down"
+
+    def _pose(self, orientation: str, handle, shape, door: bool, side, centre, events: list):
+        """The grasp-site orientation and position and the open fingers for a handle grasped in
+        ``orientation``, and the orientation before a low handle's pitch; the choices logged to
+        ``events``."""
+        cfg = self.config.grasp
         quat = orientation_for_handle(orientation)
         neighbour_above = door and self._neighbour_above(shape)
         if orientation == "horizontal" and (handle.centre[2] < cfg.flip_below or neighbour_above):
             quat = quat_mul(quat, yaw_quat(math.pi))  # fingers down (site frame: rotate about +z)
-        side = self.hinge_side(handle, obs) if door else None
         flip_doors = cfg.flip_right_doors and (orientation == "vertical" or not cfg.horizontal_doors_unflipped)
         if door and flip_doors and self.spec.hand_type != "parallel_gripper":
             # fingers toward the hinge: the door's pull presses the handle into the finger curl
-            result.events.append({"hinge_side": side})
+            events.append({"hinge_side": side})
             if side == "right":
                 quat = quat_mul(quat, yaw_quat(math.pi))
-        self.state.hinge = self.hinge_from_depth(handle, side, obs, result) if door else None
-        style = self.grasp_style(handle, shape)
-        depth = float(cfg.depth.get(style, cfg.depth.get(STYLE_KIND[style], 0.0)))
-        pos = handle.centre + np.array([depth, 0.0, 0.0])
-        quat, pos = self._low_handle(handle, orientation, quat, pos, result)
+        level = quat
+        sink = _Events(events)
+        quat, pos = self._low_handle(handle, orientation, quat, centre, sink)
         pre = self.spec.pregrasp_profile(orientation)
-        closed = self.closed_profile(orientation)
         if self.spec.hand_type == "parallel_gripper":
-            pre = self.gripper_opening(pre, orientation, shape, result)
-        grasp = GraspChoice(style, orientation, quat, pos, pre, closed)
-        self.state.first_pos = pos.copy()
-        result.events.append({"grasp": grasp.to_dict()})
-        return grasp
+            pre = self.gripper_opening(pre, orientation, shape, sink)
+        return quat, pos, pre, level
+
+    def clears(self, handle, shape, quat, pos, pre):
+        """(whether the open hand at this pose keeps ``clearance_margin`` from the floor and from the
+        panel behind the handle, floor clearance (m), panel clearance (m)); None where the hand does
+        not check (``clearance_margin`` null in its ``planner.json``)."""
+        margin = self.hand.clearance_margin
+        if margin is None:
+            return None
+        panel_x = float(handle.front_x + shape.protrusion)
+        floor, door = clearances(outline_for(self.spec, pre), pos, quat, panel_x)
+        return min(floor, door) >= margin, round(floor, 4), round(door, 4)
+
+    def clear_pose(self, handle, shape, level, quat, pos, pre, result: PlanResult):
+        """A horizontal handle whose pose does not clear the floor and the panel: the first of the
+        hand's ``clearance_pitches`` (deg, from the level pose ``level``) at which it does, a
+        gripper's fingers opened no wider than they must (down to the bar's half thickness plus
+        ``clearance_bar_margin``); else the pose unchanged (event ``no_clear_pose``)."""
+        hand = self.hand
+        gripper = self.spec.hand_type == "parallel_gripper"
+        narrowest = shape.thickness / 2 + hand.clearance_bar_margin
+        for pitch in hand.clearance_pitches:
+            q = quat_mul(axis_angle_quat((0.0, 1.0, 0.0), math.radians(pitch)), level)
+            widths = np.arange(float(np.max(pre)), narrowest - 1e-9, -0.002) if gripper else [None]
+            for width in widths:  # a gripper: from its chosen opening down, 2 mm at a time
+                fingers = pre if width is None else np.minimum(pre, width)
+                clear = self.clears(handle, shape, q, pos, fingers)
+                if clear[0]:
+                    result.events.append({"clearance_pitch": [pitch, *clear[1:]]})
+                    return q, fingers
+        result.events.append({"no_clear_pose": list(self.clears(handle, shape, quat, pos, pre)[1:])})
+        return quat, pre
 
     def _low_handle(self, handle, orientation: str, quat, pos, result: PlanResult):
         """The hand's own way with a handle near the floor (``hands/<name>/planner.json``): pitch the

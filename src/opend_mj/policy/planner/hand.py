@@ -74,7 +74,21 @@ class HandPlannerConfig:
     thumb; not the palm) press on something. ``grip_lost_change`` (the finger joints' unit: m for
     a gripper's slides, or None): the grip is lost, and the pull stops, when a finger joint moved
     this much from where it closed on the handle (only for fingers that do not move while they
-    hold)."""
+    hold).
+
+    ``clearance_margin`` (m, or None: no check): the open hand at its grasp pose "clears" when
+    its collision geoms stay this far above the floor and in front of the panel behind the handle
+    (:mod:`.clearance`). Where it does not: ``clearance_knob_turn``: a knob is grasped with the
+    hand turned a quarter about the approach axis (the other finger orientation) where that pose
+    keeps more room to the floor and the panel (the smaller of the two); ``clearance_pitches`` (deg, tried in order): a horizontal handle is approached pitched
+    down by the first of these (90 = straight down) at which the hand clears, a gripper's fingers
+    opened as little as the bar's half thickness plus ``clearance_bar_margin`` (m).
+
+    ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
+    (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
+    segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
+    to its door is passed over by the curl, whose tips then press on the panel. No slide toward a
+    neighbour seen beside the bar (``GraspConfig.neighbour_clear``)."""
 
     low_handle_lift: float = 0.0
     min_grasp_height: float | None = None
@@ -82,6 +96,11 @@ class HandPlannerConfig:
     pinch_gap: float = 0.0
     hold_parts: int = 1
     grip_lost_change: float | None = None
+    clearance_margin: float | None = None
+    clearance_knob_turn: bool = False
+    clearance_pitches: tuple = ()
+    clearance_bar_margin: float = 0.004
+    hook_slide: float = 0.0
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
@@ -109,7 +128,19 @@ class HandPlannerConfig:
                 continue
             if key not in fields:
                 raise ValueError(f"{path}: unknown field {key!r} (known: {', '.join(fields)})")
-            optional = key in ("min_grasp_height", "grip_lost_change")
+            if key == "clearance_knob_turn":
+                if not isinstance(value, bool):
+                    raise ValueError(f"{path}: 'clearance_knob_turn' must be true or false, got {value!r}")
+                values[key] = value
+                continue
+            if key == "clearance_pitches":
+                ok = isinstance(value, list) and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 90 for v in value)
+                if not ok:
+                    raise ValueError(f"{path}: 'clearance_pitches' must be a list of degrees in [0, 90], got {value!r}")
+                values[key] = tuple(float(v) for v in value)
+                continue
+            optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin")
             if value is None and optional:
                 values[key] = None
                 continue
