@@ -199,3 +199,19 @@ def test_episode_identity_derives_key_record_and_video_name():
     # episodes of one cabinet that differ only in target, solver or wording share a scene
     assert scene_key(job) == scene_key(EpisodeJob(**{**job.__dict__, "joint": "k", "paraphrase": 1}))
     assert scene_key(job) != scene_key(EpisodeJob(**{**job.__dict__, "light_scale": 0.7}))
+
+
+def test_the_package_version_is_the_one_pyproject_declares():
+    """`opend --version` and `opend_mj.__version__` name the release in pyproject.toml (the
+    CHANGELOG's headings follow it)."""
+    import re
+
+    from click.testing import CliRunner
+
+    import opend_mj
+    from opend_mj.cli import main
+
+    declared = re.search(r'^version = "([^"]+)"', (PACKAGE_DIR.parents[1] / "pyproject.toml").read_text(), re.M).group(1)
+    assert opend_mj.__version__ == declared
+    assert declared in CliRunner().invoke(main, ["--version"]).output
+    assert f"## {declared}" in (PACKAGE_DIR.parents[1] / "CHANGELOG.md").read_text()

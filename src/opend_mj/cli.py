@@ -11,6 +11,8 @@ import importlib
 
 import click
 
+from opend_mj import __version__
+
 #: command name -> "module:attribute" of a click command.
 COMMANDS: dict[str, str] = {
     "generate": "opend_mj.commands.assets:generate",
@@ -54,7 +56,7 @@ class LazyGroup(click.Group):
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="opend-mj")
+@click.version_option(version=__version__, package_name="opend-mj")
 def main() -> None:
     """opend-mj: language-driven door and drawer opening on MuJoCo."""
 
