@@ -25,6 +25,7 @@ def demos_file(small_dataset, tmp_path_factory):
 def test_demos_read_back_with_the_documented_keys(demos_file):
     from opend_mj.apps.demos import read_demos
     from opend_mj.apps.planner_demos import DEMO_OBS_KEYS
+    from opend_mj.policy.learned.bc import PERCEPT_DIM
     from opend_mj.sim.hands import load_spec
 
     out, _ = demos_file
@@ -41,7 +42,7 @@ def test_demos_read_back_with_the_documented_keys(demos_file):
         for key in DEMO_OBS_KEYS:
             assert len(d.obs[key]) == t, key
         assert np.allclose(np.diff(d.obs["time"][:, 0]), 1 / 60)
-        assert d.obs["handle_features"].shape == (t, 22) and np.isfinite(d.obs["handle_features"]).all()
+        assert d.obs["handle_features"].shape == (t, PERCEPT_DIM) and np.isfinite(d.obs["handle_features"]).all()
         assert d.obs["instruction"].shape == (t, 14) and (d.obs["instruction"].sum(axis=1) == 3).all()
         for key in ("instruction", "cabinet", "target_joint", "target_type", "hand", "solver", "split", "seed",
                     "success", "failed_stage", "open_ratio", "joint_value", "episode", "job_key"):
