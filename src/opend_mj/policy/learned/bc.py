@@ -274,5 +274,4 @@ def load_policy(path, device: str = "cpu"):
 
 __all__ = ["BCConfig", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
            "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
-           "percept_vector",
-           "quat_from_rot6", "rot6", "step_features"]
+           "percept_vector", "quat_from_rot6", "rot6", "step_features"]
