@@ -102,7 +102,7 @@ def main(argv=None) -> None:
     from matplotlib.ticker import NullFormatter
 
     ticks = sorted({n for rows in by_hand.values() for n, _ in rows})
-    ax.set_xticks(ticks, [str(n) for n in ticks])
+    ax.set_xticks(ticks, [str(n) for n in ticks], rotation=60, fontsize=7)  # close counts stay legible
     ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("successful planner demonstrations used for training")
     ax.set_ylabel("success on the test split (%)")

@@ -25,6 +25,7 @@ def demos_file(small_dataset, tmp_path_factory):
 def test_demos_read_back_with_the_documented_keys(demos_file):
     from opend_mj.apps.demos import read_demos
     from opend_mj.apps.planner_demos import DEMO_OBS_KEYS
+    from opend_mj.policy.learned.bc import PERCEPT_DIM
     from opend_mj.sim.hands import load_spec
 
     out, _ = demos_file
@@ -41,7 +42,7 @@ def test_demos_read_back_with_the_documented_keys(demos_file):
         for key in DEMO_OBS_KEYS:
             assert len(d.obs[key]) == t, key
         assert np.allclose(np.diff(d.obs["time"][:, 0]), 1 / 60)
-        assert d.obs["handle_features"].shape == (t, 22) and np.isfinite(d.obs["handle_features"]).all()
+        assert d.obs["handle_features"].shape == (t, PERCEPT_DIM) and np.isfinite(d.obs["handle_features"]).all()
         assert d.obs["instruction"].shape == (t, 14) and (d.obs["instruction"].sum(axis=1) == 3).all()
         for key in ("instruction", "cabinet", "target_joint", "target_type", "hand", "solver", "split", "seed",
                     "success", "failed_stage", "open_ratio", "joint_value", "episode", "job_key"):
@@ -127,3 +128,59 @@ def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path
     assert score.exit_code == 0 and "bc-fasterrcnn" in score.output, score.output
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0 and "0 episodes run, 1 already done" in again.output
+
+
+def test_dart_noise_labels_are_the_planners_clean_actions(small_dataset, tmp_path):
+    """With action noise (DART) the scene is stepped with the planner's action plus a smooth offset,
+    the stored labels are the planner's own clean actions, and replay (of the sent actions)
+    reproduces the open ratio; the same job gives the same noise."""
+    from opend_mj.apps.demos import read_demos, replay_demo
+    from opend_mj.apps.planner_demos import ActionNoise, NoiseProcess, RecordConfig, record_episode
+    from opend_mj.sim.envs import ActionAdapter
+    from opend_mj.sim.task import TaskConfig
+
+    out = tmp_path / "dart.hdf5"
+    args = ["demos", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka", "--limit", "2",
+            "--keep-failures", "--noise-pos", "0.004", "--noise-rot", "0.03", "--noise-fingers", "0.05",
+            "--out", str(out), "--no-progress"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    attrs, demos = read_demos(out)
+    assert len(demos) == 2
+    for d in demos:
+        sent = d.extra["actions_executed"]
+        assert sent.shape == d.actions.shape
+        gap = np.linalg.norm(sent[:, :3] - d.actions[:, :3], axis=1)
+        assert gap.max() > 0.002 and gap[len(gap) // 2:].mean() > 0.001  # the hand was pushed off the plan
+        noise = json.loads(d.attrs["action_noise"])
+        assert noise["pos"] == 0.004 and noise["tau"] == 0.3
+        # the label of a step is the planner's reply to the (perturbed) state it saw: the commanded
+        # pose before a step is the previous step's *sent* action (where the mocap speed limit did
+        # not cut it short), not its label
+        def matches(actions):
+            return float(np.mean(np.abs(d.obs["mocap_pos"][1:] - actions[:-1, :3]).max(axis=1) < 1e-9))
+
+        assert matches(sent) > 0.8 and matches(d.actions) < 0.05
+        r = replay_demo(d, attrs["env_args"])
+        assert r.error <= 1e-9
+    # the process: stationary spread as configured, zero offset before the first step, reproducible
+    adapter = ActionAdapter("franka", TaskConfig())
+    a = np.concatenate([[0.1, 0.2, 1.0, 1.0, 0.0, 0.0, 0.0], (adapter.finger_low + adapter.finger_high) / 2])
+    offsets = []
+    for seed in (1, 1, 2):
+        proc = NoiseProcess(ActionNoise(pos=0.01, tau=0.1), adapter.finger_low, adapter.finger_high, 1 / 60, seed)
+        offsets.append(np.array([proc.perturb(a)[:3] - a[:3] for _ in range(3000)]))
+    assert np.array_equal(offsets[0], offsets[1]) and not np.array_equal(offsets[0], offsets[2])
+    assert 0.008 < offsets[0][300:].std() < 0.012
+    assert np.array_equal(proc.perturb(a)[7:], a[7:])  # no finger noise asked for
+    with pytest.raises(ValueError, match="tau"):
+        ActionNoise(pos=0.01, tau=0.0)
+    assert RecordConfig().noise.active is False
+    line, demo = record_episode(_first_job(small_dataset), None, RecordConfig())
+    assert "actions_executed" not in demo.extra and demo.attrs["action_noise"] == ""
+
+
+def _first_job(cabinets):
+    from opend_mj.apps.planner_demos import demo_jobs
+
+    return demo_jobs(cabinets, ["franka"], split="all", limit=1)[0]

@@ -52,3 +52,24 @@ def test_lags_start_at_the_first_step():
 def test_config_round_trips():
     c = BCConfig(chunk=7, lags=(0, 2))
     assert BCConfig.from_dict(c.to_dict()) == c
+
+
+def test_percept_gives_a_doors_hinge_line_relative_to_the_handle():
+    """The last three percept numbers: the hinge line (x, y) relative to the handle centre and a
+    flag; zeros for a handle with none (a drawer), the first 22 numbers unchanged by it (what the
+    checkpoints of before the hinge line read)."""
+    from opend_mj.policy.learned.bc import PERCEPT_DIM, HandlePercept, percept_vector
+    from opend_mj.policy.perception.handle import HandleEstimate, HandleShape
+
+    handle = HandleEstimate(centre=np.array([-0.3, 0.1, 0.8]), orientation="vertical", kind="bar",
+                            size=(0.02, 0.12), front_x=-0.33, panel_x=-0.28)
+    shape = HandleShape(thickness=0.015, length=0.12, gap=0.02, protrusion=0.035,
+                        clear={"up": 0.1, "down": 0.1, "left": 0.15, "right": 0.05})
+    drawer = percept_vector(HandlePercept(box=None, handle=handle, shape=shape, hinge=None))
+    door = percept_vector(HandlePercept(box=None, handle=handle, shape=shape, hinge="left",
+                                        hinge_point=np.array([-0.28, 0.45])))
+    assert drawer.shape == door.shape == (PERCEPT_DIM,)
+    assert drawer[-3:].tolist() == [0.0, 0.0, 0.0]
+    assert np.allclose(door[-3:], [0.02, 0.35, 1.0])
+    assert np.allclose(door[:3], handle.centre)
+    assert np.array_equal(door[:11], drawer[:11]) and np.array_equal(door[14:22], drawer[14:22])  # but the side

@@ -343,7 +343,8 @@ class ReplayResult:
 
 
 def replay_demo(demo: Demo, args: dict | str, cabinet_dir: Path | None = None) -> ReplayResult:
-    """Re-create the env from the demo's episode and the file's env config, step the stored actions."""
+    """Re-create the env from the demo's episode and the file's env config, step the stored actions
+    (the ones sent, ``actions_executed``, where a recording with noise stored them beside its labels)."""
     from opend_mj.sim.task import make_environment
 
     config = task_config_from_args(args)
@@ -354,7 +355,7 @@ def replay_demo(demo: Demo, args: dict | str, cabinet_dir: Path | None = None) -
     try:
         ts = env.reset()
         obs: dict[str, list] = {}
-        for a in demo.actions:
+        for a in demo.extra.get("actions_executed", demo.actions):
             for k, v in _obs_of(ts, demo.obs.keys()).items():
                 obs.setdefault(k, []).append(v)
             ts = env.step(a)

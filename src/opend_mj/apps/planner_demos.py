@@ -8,6 +8,14 @@ the planner sent, in both agent action spaces: ``actions`` (the task's absolute 
 clipped to [-1, 1]). The solver's box and the handle it gives in the first image (`policy.learned.bc`:
 the planner's own back-projection) are stored with every step, and optionally an RGB-D image per step.
 
+With :class:`ActionNoise` on (DART, Laskey et al. 2017, "DART: Noise injection for robust imitation
+learning"), the action sent to the scene is the planner's plus a smooth random offset, while the
+stored label (``actions``, ``actions_delta``) stays the planner's own, clean action: the planner
+then acts from the perturbed states that the hand really reaches (its pull steers from the measured
+grasp site, its grasp check reads touch, its waypoints are absolute targets), so the demonstrations
+show what to do from slightly wrong states, which a learner's own errors lead it into. The sent
+actions are stored as ``actions_executed``, which is what a replay steps.
+
 The file is the robomimic / LIBERO HDF5 layout of `opend_mj.apps.demos` (see there and the docs
 page ``docs/demonstrations.md`` for the keys). Successful episodes are kept by default; with
 ``keep_failures`` the failed ones too, labelled (``success``, ``failed_stage``). Every episode tried
@@ -20,6 +28,8 @@ from __future__ import annotations
 import json
 import math
 import time
+import zlib
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,15 +45,74 @@ DEMO_OBS_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", 
 
 
 @dataclass(frozen=True)
+class ActionNoise:
+    """DART noise on the actions sent while recording (labels stay the planner's clean actions).
+
+    Each part is an Ornstein-Uhlenbeck offset (zero at the start, then stationary spread ``pos`` etc.,
+    correlation time ``tau``): a hand under a mocap weld filters out step-to-step jitter, so the offset
+    has to persist for a fraction of a second to move the hand off the planner's path."""
+
+    pos: float = 0.0  # m: spread of the root target's offset, per axis
+    rot: float = 0.0  # rad: spread of the root target's rotation offset, per axis (a rotation vector)
+    fingers: float = 0.0  # spread of each finger target's offset, as a fraction of its actuator range
+    tau: float = 0.3  # s: correlation time of the offsets
+
+    def __post_init__(self):
+        for name in ("pos", "rot", "fingers"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"action noise {name} must be >= 0, not {getattr(self, name)}")
+        if self.tau <= 0:
+            raise ValueError(f"action noise tau must be > 0 s, not {self.tau}")
+
+    @property
+    def active(self) -> bool:
+        return max(self.pos, self.rot, self.fingers) > 0
+
+
+@dataclass(frozen=True)
 class RecordConfig:
-    """What `record_demos` keeps."""
+    """What `record_demos` keeps, and the noise injected into the recorded planner's actions."""
 
     image_size: int = 0  # RGB-D of the front camera at every step, this many pixels square (0: none)
     keep_failures: bool = False
+    noise: ActionNoise = ActionNoise()
 
     def __post_init__(self):
         if self.image_size and self.image_size < 16:
             raise ValueError(f"image_size must be 0 (no images) or >= 16, not {self.image_size}")
+
+
+class NoiseProcess:
+    """The offsets of :class:`ActionNoise` for one episode, drawn from ``seed`` (deterministic)."""
+
+    def __init__(self, noise: ActionNoise, finger_low, finger_high, dt: float, seed):
+        self.noise = noise
+        self.low, self.high = np.asarray(finger_low, float), np.asarray(finger_high, float)
+        self.rho = math.exp(-dt / noise.tau)  # per-step correlation
+        self.scale = np.concatenate([[noise.pos] * 3, [noise.rot] * 3, noise.fingers * (self.high - self.low)])
+        self.offset = np.zeros(len(self.scale))
+        self.rng = np.random.default_rng(seed)
+
+    def perturb(self, action) -> np.ndarray:
+        """The action to send: ``action`` (task action: root pos, quat w x y z, finger targets) plus
+        this step's offset (fingers kept inside their actuator ranges)."""
+        from opend_mj.transforms import axis_angle_quat, quat_mul
+
+        self.offset = self.rho * self.offset + math.sqrt(1 - self.rho ** 2) * self.scale * \
+            self.rng.standard_normal(len(self.scale))
+        a = np.asarray(action, float).copy()
+        a[:3] += self.offset[:3]
+        angle = float(np.linalg.norm(self.offset[3:6]))
+        if angle > 1e-12:
+            q = quat_mul(axis_angle_quat(self.offset[3:6], angle), a[3:7] / np.linalg.norm(a[3:7]))
+            a[3:7] = q / np.linalg.norm(q)
+        a[7:] = np.clip(a[7:] + self.offset[6:], self.low, self.high)
+        return a
+
+
+def noise_seed(job: EpisodeJob) -> list[int]:
+    """The noise seed of a job: its key (cabinet, target, hand, seed...), hashed stably."""
+    return [35, zlib.crc32(json.dumps(list(job.key())).encode())]
 
 
 def log_path(out: Path) -> Path:
@@ -64,10 +133,12 @@ def _rotvec(q) -> np.ndarray:
 class _RecordingEnv:
     """The scene as the planner steps it, storing the agent's observation and the action of each step."""
 
-    def __init__(self, env, reader, adapter, camera=None):
+    def __init__(self, env, reader, adapter, camera=None, noise: NoiseProcess | None = None):
         self._env, self._reader, self._adapter, self._camera = env, reader, adapter, camera
+        self._noise = noise
         self.obs: dict[str, list] = {}
-        self.actions: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []  # the planner's (clean) actions: the labels
+        self.executed: list[np.ndarray] = []  # the actions sent (the labels plus noise, where noise is on)
         self.deltas: list[np.ndarray] = []
 
     def __getattr__(self, name):
@@ -91,7 +162,9 @@ class _RecordingEnv:
         rot = _rotvec(quat_mul(a[3:7] / np.linalg.norm(a[3:7]), conj))
         delta = np.concatenate([(a[:3] - obs["mocap_pos"]) / ad.step_pos, rot / ad.step_rot, ad.fingers_to_unit(a[7:])])
         self.deltas.append(np.clip(delta, -1.0, 1.0))
-        ts = self._env.step(a)
+        sent = self._noise.perturb(a) if self._noise is not None else a
+        self.executed.append(sent)
+        ts = self._env.step(sent)
         if ts.last():
             raise PhysicsDiverged(f"physics instability: {self._env.task.physics_warnings}")
         return ts
@@ -128,7 +201,10 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
             if grasp is not None:
                 pconfig = grasp.apply(pconfig)
             percept = perceive_handle(solver, rgb, depth, task.instruction, view, pconfig)
-            rec = _RecordingEnv(env, reader, ActionAdapter(job.hand, task.config), extra_cam)
+            adapter = ActionAdapter(job.hand, task.config)
+            noise = NoiseProcess(config.noise, adapter.finger_low, adapter.finger_high, task.control_timestep,
+                                 noise_seed(job)) if config.noise.active else None
+            rec = _RecordingEnv(env, reader, adapter, extra_cam, noise)
             planner = Planner(solver, task.hand.spec, pconfig, grasp=None)
             if grasp is not None:
                 planner.grasp = grasp
@@ -164,10 +240,14 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
         "handle_kind": percept.handle.kind if percept is not None else "",
         "handle_orientation": percept.handle.orientation if percept is not None else "",
         "hinge_seen": (percept.hinge or "") if percept is not None else "",
+        "action_noise": json.dumps(dataclasses.asdict(config.noise)) if config.noise.active else "",
     }
+    extra = {"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1)}
+    if config.noise.active:
+        extra["actions_executed"] = np.asarray(rec.executed, float).reshape(n, -1)
     demo = Demo(actions=np.asarray(rec.actions, float).reshape(n, -1), obs=obs, attrs=attrs,
                 final={k: np.asarray(v)[None] for k, v in reader.proprio().items()},
-                extra={"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1)})
+                extra=extra)
     demo.env_args = env_args(task.config)  # type: ignore[attr-defined]
     line = {"key": key, "cabinet": job.cabinet, "joint": job.joint, "hand": job.hand, "solver": job.solver,
             "seed": job.seed, "split": job.split, "success": success, "failed_stage": failed,
@@ -313,5 +393,5 @@ def demo_jobs(cabinets_dir, hands, solver: str = "oracle", split: str = "train",
                                  cabinet_ids=cabinet_ids, pull=pull)]
 
 
-__all__ = ["DEMO_OBS_KEYS", "RecordConfig", "TRAINING_KEYS", "demo_jobs", "load_training_demos", "log_path",
-           "record_demos", "record_episode"]
+__all__ = ["ActionNoise", "DEMO_OBS_KEYS", "NoiseProcess", "RecordConfig", "TRAINING_KEYS", "demo_jobs",
+           "load_training_demos", "log_path", "noise_seed", "record_demos", "record_episode"]

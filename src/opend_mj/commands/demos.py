@@ -27,13 +27,21 @@ from opend_mj.commands.evaluate import _check_cabinets, _check_hands, _check_sol
               help="Also store the front camera's RGB-D at every step at this size (0: none).")
 @click.option("--keep-failures", is_flag=True, default=False,
               help="Keep failed episodes too (attrs success=false and failed_stage say why).")
+@click.option("--noise-pos", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="DART: spread (m) of a smooth offset added to the root target sent; labels stay the planner's.")
+@click.option("--noise-rot", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="DART: spread (rad) of the root target's rotation offset.")
+@click.option("--noise-fingers", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="DART: spread of the finger targets' offsets (fraction of each actuator range).")
+@click.option("--noise-tau", type=click.FloatRange(min=0, min_open=True), default=0.3, show_default=True,
+              help="DART: correlation time (s) of the offsets.")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (spawned).")
 @click.option("--progress/--no-progress", default=True)
-def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, image_size, keep_failures, workers,
-          progress):
+def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, image_size, keep_failures, noise_pos,
+          noise_rot, noise_fingers, noise_tau, workers, progress):
     """Record the planner's episodes as demonstrations (agent observations and actions at 60 Hz)."""
-    from opend_mj.apps.planner_demos import RecordConfig, demo_jobs, log_path, record_demos
+    from opend_mj.apps.planner_demos import ActionNoise, RecordConfig, demo_jobs, log_path, record_demos
 
     if out.suffix.lower() not in (".hdf5", ".h5"):
         raise click.BadParameter(f"{out}: demonstrations are written as HDF5 (.hdf5 or .h5)", param_hint="--out")
@@ -41,9 +49,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
                      cabinet_ids=list(cabinet_ids) or None)
     if not jobs:
         raise click.ClickException(f"no episodes: split {split!r} of {cabinets_dir} has no targets")
-    counts = record_demos(jobs, out, workers=workers, config=RecordConfig(image_size=image_size,
-                                                                          keep_failures=keep_failures),
-                          progress=progress)
+    noise = ActionNoise(pos=noise_pos, rot=noise_rot, fingers=noise_fingers, tau=noise_tau)
+    config = RecordConfig(image_size=image_size, keep_failures=keep_failures, noise=noise)
+    counts = record_demos(jobs, out, workers=workers, config=config, progress=progress)
     click.echo(f"{counts['ran']} episodes recorded, {counts['skipped']} already tried, {counts['success']} "
                f"successes, {counts['kept']} kept, {counts['errors']} errors -> {out} (log {log_path(out)})")
     if counts["ran"] and counts["errors"] == counts["ran"]:

@@ -77,6 +77,10 @@ class BCAgent:
         if ckpt.get("hand") not in (None, episode.hand):
             raise ValueError(f"{path}: trained for the {ckpt['hand']} hand, not {episode.hand}")
         self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
+        from opend_mj.sim.envs import instruction_onehot
+
+        # the percept numbers this checkpoint was trained with (older ones: the first 22 of today's)
+        self._percept_dim = int(ckpt["dims"]["ctx"]) - len(instruction_onehot(episode.instruction))
         default = ckpt.get("stop_time", ckpt.get("max_time", episode.time_limit))
         self._max_time = float(self.stop_time if self.stop_time is not None else default)
         self._episode = episode
@@ -100,7 +104,7 @@ class BCAgent:
             if self.percept is None:
                 self.stopped = "locate"
                 return None
-            vec = self.percept.vector()
+            vec = self.percept.vector()[:self._percept_dim]
             self._centre = vec[:3]
             self._ctx = torch.from_numpy(context_features(vec, obs["instruction"]))[None]
         if float(obs["time"][0]) >= self._max_time:

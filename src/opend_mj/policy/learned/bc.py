@@ -7,7 +7,10 @@ Inputs (only what the evaluation protocol gives an agent; never ground truth):
   (:func:`perceive_handle`: the planner's own perception, `opend_mj.policy.perception`): the 3D grip
   centre (world, m), bar or knob, horizontal or vertical, its extent (m), how far it stands out of
   the panel, the free space around it, the side a door hinges on as the depth image shows it; and
-  the instruction's one-hot code (`opend_mj.sim.envs.instruction_onehot`, 14 numbers).
+  the instruction's one-hot code (`opend_mj.sim.envs.instruction_onehot`, 14 numbers); for a door,
+  where its hinge line is (the planner's own estimate: the hinge side named by the instruction or
+  seen in depth, at the edge of the door's front plane in depth), relative to the handle, which
+  gives the circle that the door's handle moves on.
 * **steps** (:func:`step_features`): the hand's own state at the current step and at earlier steps
   (``lags``): grasp site and commanded root (mocap) positions relative to the perceived handle centre
   (m), their orientations as the first two columns of the rotation matrix (6 numbers each, continuous
@@ -36,8 +39,8 @@ from opend_mj.transforms import mat_to_quat, quat_to_mat
 
 #: Observation keys a step feature reads (all in the agent's observation, `policy.agents`).
 STEP_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch", "time")
-#: Length of :func:`percept_vector`.
-PERCEPT_DIM = 22
+#: Length of :func:`percept_vector` (checkpoints of before the hinge line read its first 22 numbers).
+PERCEPT_DIM = 25
 HINGE_SIDES = ("left", "right")
 
 
@@ -83,6 +86,8 @@ class HandlePercept:
     handle: object  # HandleEstimate
     shape: object  # HandleShape
     hinge: str | None
+    #: a door's hinge line (world x, y; m) as the planner sees it in depth (`hinge_line`), else None
+    hinge_point: np.ndarray | None = None
 
     def vector(self) -> np.ndarray:
         return percept_vector(self)
@@ -109,13 +114,36 @@ def perceive_handle(solver, rgb, depth, instruction: str, view, planner_config=N
     shape = measure_handle(handle, box, depth, view, seen)
     door = describe_instruction(instruction).kind == "door"
     hinge = infer_hinge_side(handle, depth, view, seen) if door else None
-    return HandlePercept(box=box, handle=handle, shape=shape, hinge=hinge)
+    point = hinge_line(handle, depth, view, instruction, config) if door else None
+    return HandlePercept(box=box, handle=handle, shape=shape, hinge=hinge, hinge_point=point)
+
+
+def hinge_line(handle, depth, view, instruction: str, planner_config) -> np.ndarray | None:
+    """A door's hinge line (world x, y; m) as the planner finds it (`Planner.hinge_from_depth`):
+    on the side the instruction names (a double door), else the side inferred from depth, where
+    the door's front plane ends in the depth image, at the panel's depth; None where unknown or
+    closer than ``min_hinge_distance`` to the handle."""
+    from opend_mj.language import hinge_side
+    from opend_mj.policy.perception import door_edges, infer_hinge_side
+
+    cfg = planner_config.grasp
+    side = hinge_side(instruction)
+    if side is None and cfg.infer_hinge:
+        side = infer_hinge_side(handle, depth, view, planner_config.perception)
+    edges = door_edges(handle, depth, view, planner_config.perception)
+    if side is None or edges is None:
+        return None
+    y = edges[0] if side == "left" else edges[1]
+    if abs(y - handle.centre[1]) < cfg.min_hinge_distance:
+        return None
+    return np.array([handle.panel_x, y], float)
 
 
 def percept_vector(p: HandlePercept) -> np.ndarray:
     """``PERCEPT_DIM`` numbers: centre (3, world m), horizontal/vertical, bar/knob, extent y/z (m),
     handle front and panel relative to the centre along x (m), hinge left/right/unknown, thickness,
-    length, gap, protrusion (m), free space up/down/left/right (m)."""
+    length, gap, protrusion (m), free space up/down/left/right (m); the hinge line relative to the
+    centre (x, y; m; zeros where none) and whether there is one."""
     h, s = p.handle, p.shape
     c = np.asarray(h.centre, float)
     hinge = [float(p.hinge == side) for side in HINGE_SIDES] + [float(p.hinge not in HINGE_SIDES)]
@@ -123,6 +151,9 @@ def percept_vector(p: HandlePercept) -> np.ndarray:
     v = np.concatenate([c, [h.orientation == "horizontal", h.orientation == "vertical", h.kind == "bar",
                             h.kind == "knob"], np.asarray(h.size, float), [h.front_x - c[0], h.panel_x - c[0]],
                         hinge, [s.thickness, s.length, s.gap, s.protrusion], clear]).astype(np.float64)
+    point = getattr(p, "hinge_point", None)
+    line = [0.0, 0.0, 0.0] if point is None else [float(point[0] - c[0]), float(point[1] - c[1]), 1.0]
+    v = np.concatenate([v, line])
     assert v.shape == (PERCEPT_DIM,)
     return v
 
@@ -242,5 +273,5 @@ def load_policy(path, device: str = "cpu"):
 
 
 __all__ = ["BCConfig", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
-           "decode_action", "encode_actions", "lag_index", "load_policy", "perceive_handle", "percept_vector",
-           "quat_from_rot6", "rot6", "step_features"]
+           "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
+           "percept_vector", "quat_from_rot6", "rot6", "step_features"]
