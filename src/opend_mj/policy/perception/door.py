@@ -9,71 +9,55 @@ from opend_mj.policy.perception.config import PerceptionConfig
 from opend_mj.policy.perception.handle import HandleEstimate
 
 
-def door_edges(handle: HandleEstimate, depth: np.ndarray, view,
-               config: PerceptionConfig = PerceptionConfig()) -> tuple[float, float] | None:
-    """World y of where the door's front plane ends to the left (+y) and to the right (-y) of the
-    handle, along the image row through it (the plane the handle stands on: pixels within
-    ``plane_tolerance`` of the panel behind the handle; the plane ends after more than
-    ``plane_gap_pixels`` pixels off it)."""
-    tolerance, gap_pixels = config.plane_tolerance, config.plane_gap_pixels
+def _plane_ends(handle: HandleEstimate, depth: np.ndarray, view, config: PerceptionConfig,
+                axis: int) -> tuple[float, float] | None:
+    """World coordinate ``axis`` (1: y, along the image row through the handle; 2: z, along its
+    column) of where the front plane the handle stands on ends on either side of it, in image order
+    (decreasing pixel index first). The plane: pixels within ``plane_tolerance`` of the panel behind
+    the handle; it ends after more than ``plane_gap_pixels`` pixels off it."""
     h, w = depth.shape
     uc, vc = view.project(handle.centre[None, :])[0]
     if not (np.isfinite(uc) and np.isfinite(vc)):
         return None
-    row = int(np.clip(vc, 0, h - 1))
-    cols = np.arange(w) + 0.5
-    points = view.backproject(cols, np.full(w, row + 0.5), depth[row])
-    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
-    start = int(np.clip(uc, 0, w - 1))
+    if axis == 1:
+        line, n, start = int(np.clip(vc, 0, h - 1)), w, int(np.clip(uc, 0, w - 1))
+        points = view.backproject(np.arange(w) + 0.5, np.full(w, line + 0.5), depth[line])
+    else:
+        line, n, start = int(np.clip(uc, 0, w - 1)), h, int(np.clip(vc, 0, h - 1))
+        points = view.backproject(np.full(h, line + 0.5), np.arange(h) + 0.5, depth[:, line])
+    on_plane = np.abs(points[:, 0] - handle.panel_x) < config.plane_tolerance
 
     # the walk starts beside the handle: its own pixels (a knob is 10+ pixels wide) are not a gap
-    half = float(handle.size[0]) / 2 + config.handle_margin
-    beside = np.abs(points[:, 1] - float(handle.centre[1])) > half
-    beside[~np.isfinite(points[:, 1])] = True
+    half = float(handle.size[axis - 1]) / 2 + config.handle_margin
+    beside = np.abs(points[:, axis] - float(handle.centre[axis])) > half
+    beside[~np.isfinite(points[:, axis])] = True
 
     def reach(step: int) -> float:
-        col, misses, last = start, 0, start
-        while 0 <= col < w and misses <= gap_pixels:
-            if on_plane[col]:
-                last, misses = col, 0
-            elif beside[col]:
+        k, misses, last = start, 0, start
+        while 0 <= k < n and misses <= config.plane_gap_pixels:
+            if on_plane[k]:
+                last, misses = k, 0
+            elif beside[k]:
                 misses += 1
-            col += step
-        return float(points[last, 1])
+            k += step
+        return float(points[last, axis])
 
-    return reach(-1), reach(+1)  # image-left is +y
+    return reach(-1), reach(+1)
+
+
+def door_edges(handle: HandleEstimate, depth: np.ndarray, view,
+               config: PerceptionConfig = PerceptionConfig()) -> tuple[float, float] | None:
+    """World y of where the door's front plane ends to the left (+y) and to the right (-y) of the
+    handle, along the image row through it (image-left is +y)."""
+    return _plane_ends(handle, depth, view, config, axis=1)
 
 
 def door_edges_vertical(handle: HandleEstimate, depth: np.ndarray, view,
                         config: PerceptionConfig = PerceptionConfig()) -> tuple[float, float] | None:
     """World z of where the door's front plane ends above and below the handle, along the image
-    column through it (as :func:`door_edges` does along the row): a flap hinged at its top or
-    bottom edge has its handle near the other edge."""
-    tolerance, gap_pixels = config.plane_tolerance, config.plane_gap_pixels
-    h, w = depth.shape
-    uc, vc = view.project(handle.centre[None, :])[0]
-    if not (np.isfinite(uc) and np.isfinite(vc)):
-        return None
-    col = int(np.clip(uc, 0, w - 1))
-    rows = np.arange(h) + 0.5
-    points = view.backproject(np.full(h, col + 0.5), rows, depth[:, col])
-    on_plane = np.abs(points[:, 0] - handle.panel_x) < tolerance
-    start = int(np.clip(vc, 0, h - 1))
-    half = float(handle.size[1]) / 2 + config.handle_margin
-    beside = np.abs(points[:, 2] - float(handle.centre[2])) > half
-    beside[~np.isfinite(points[:, 2])] = True
-
-    def reach(step: int) -> float:
-        row, misses, last = start, 0, start
-        while 0 <= row < h and misses <= gap_pixels:
-            if on_plane[row]:
-                last, misses = row, 0
-            elif beside[row]:
-                misses += 1
-            row += step
-        return float(points[last, 2])
-
-    return reach(-1), reach(+1)  # image-up is +z
+    column through it (image-up is +z): a flap hinged at its top or bottom edge has its handle near
+    the other edge."""
+    return _plane_ends(handle, depth, view, config, axis=2)
 
 
 def infer_hinge_side(handle: HandleEstimate, depth: np.ndarray, view,
