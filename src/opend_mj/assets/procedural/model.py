@@ -207,9 +207,7 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
                     0.025 + 0.5 * min(0.3, 0.5 * (lx1 - lx0)))
             pieces, kind, orient = make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
             if orient == "horizontal" and not door_bar_centred:  # its real length, from near the free edge
-                bl, bh = bounds_of(pieces)
-                shift = (free_x + inward * bar_end_margin) - (bh[0] if hinge == "left" else bl[0])
-                pieces = [translate_piece(p, (shift, 0.0, 0.0)) for p in pieces]
+                pieces = _bar_end_at(pieces, free_x, inward, bar_end_margin)
             hinge_x = lx0 if hinge == "left" else lx1
             axis = (0.0, -1.0, 0.0) if hinge == "left" else (0.0, 1.0, 0.0)
             origin = (hinge_x, float((lo[1] + hi[1]) / 2), zf)
@@ -222,6 +220,14 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
         hl, hh = bounds_of(tg.visuals[-1].pieces)
         tg.handle_center = tuple(float(v) for v in (hl + hh) / 2)
     return carcass, targets
+
+
+def _bar_end_at(pieces: list[Piece], free_x: float, inward: float, margin: float) -> list[Piece]:
+    """A horizontal bar's pieces moved along x so that its end nearest the door's free edge (at x =
+    ``free_x``; ``inward``: +1 or -1, the direction into the door) stands ``margin`` (m) inside it."""
+    bl, bh = bounds_of(pieces)
+    shift = (free_x + inward * margin) - (bh[0] if inward < 0 else bl[0])
+    return [translate_piece(p, (shift, 0.0, 0.0)) for p in pieces]
 
 
 def _flap(rng: np.random.Generator, cfg: GeneratorConfig, lo: np.ndarray, hi: np.ndarray, edge: str,
@@ -242,9 +248,7 @@ def _flap(rng: np.random.Generator, cfg: GeneratorConfig, lo: np.ndarray, hi: np
     pieces, kind, orient = make_handle(rng, cfg, st, lo, hi, np.array([hx, hy, 0.0]))
     if double and orient == "horizontal":  # side by side: the bar ends near the pair's meeting edge
         free_x, inward = (float(hi[0]), -1.0) if side == "left" else (float(lo[0]), 1.0)
-        bl, bh = bounds_of(pieces)
-        shift = (free_x + inward * end_margin) - (bh[0] if side == "left" else bl[0])
-        pieces = [translate_piece(p, (shift, 0.0, 0.0)) for p in pieces]
+        pieces = _bar_end_at(pieces, free_x, inward, end_margin)
     # a positive angle swings the free edge out of the front (+z) about the hinge line on the front face
     axis = (1.0, 0.0, 0.0) if edge == "bottom" else (-1.0, 0.0, 0.0)
     origin = (hx, float(lo[1] if edge == "bottom" else hi[1]), float(hi[2]))
