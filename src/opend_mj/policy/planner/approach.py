@@ -68,7 +68,7 @@ class ApproachAndClose:
         # pull back up to ``probe_distance``: a bar loose in a curled hand engages within a few cm
         start = robot.site_pos()
         n = max(1, int(math.ceil(cfg.probe_distance / (cfg.probe_speed * robot.control_dt))))
-        back = -g.axis
+        back = -g.axis if g.probe is None else np.asarray(g.probe, float)
         # contacts on a held bar come and go from step to step: judge over a window of steps
         window = max(1, int(round(cfg.touch_window / robot.control_dt)))
         recent: list[bool] = []

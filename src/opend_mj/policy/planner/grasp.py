@@ -28,7 +28,7 @@ class _Events:
 
 
 #: the grasp-depth key of each style (``GraspConfig.depth[style]`` wins where it has one)
-STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob"}
+STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob", "hook_down": "bar"}
 
 
 class GraspGeometry:
@@ -68,8 +68,14 @@ class GraspGeometry:
             if min(rooms[best][1:]) > min(clear[1:]):  # a knob is round: turned a quarter, it holds it as well
                 result.events.append({"knob_turned": [other, *clear[1:], *rooms[best][1:]]})
                 orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
+        probe = None
         if clear is not None and not clear[0] and orientation == "horizontal":
             quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
+            down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and \
+                result.events[-1].get("no_clear_pose") is not None else None
+            if down is not None:
+                (quat, pos, pre), style = down, "hook_down"
+                probe = np.array([-1.0, 0.0, 0.0])  # out of the panel: the hook pulls the bar's back
         if style == "hook" and door and self.hand.hook_slide:
             # a door's bar at the fingers' middle segments, where their curl closes behind it (at the
             # proximal ones the tips curl past a thin bar onto the panel, and the bar slips out as the
@@ -87,7 +93,8 @@ class GraspGeometry:
             if slide > 0.0:
                 pos = pos - slide * fingers
                 result.events.append({"hook_slide": round(slide, 4)})
-        grasp = GraspChoice(style, orientation, quat, pos, pre, self.closed_profile(orientation))
+        closed = pre if style == "hook_down" else self.closed_profile(orientation)
+        grasp = GraspChoice(style, orientation, quat, pos, pre, closed, probe=probe)
         self.state.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
@@ -154,6 +161,47 @@ class GraspGeometry:
                     return q, fingers
         result.events.append({"no_clear_pose": list(self.clears(handle, shape, quat, pos, pre)[1:])})
         return quat, pre
+
+    def hook_down_pose(self, handle, shape, result: PlanResult):
+        """(site orientation, position, finger targets) of a hook from above into the stand-off
+        gap behind a horizontal bar (``hook_down_pitches`` in the hand's ``planner.json``): the
+        fingers closed (one hook, the closing axis along the bar) and pointing down, the site
+        ``hook_down_depth`` below the bar's centre. A bar seen from the front may be deeper than
+        it is tall (the gap is measured as if it were square), so the fingers go as near the panel
+        as the hand allows: ``hook_down_margin`` in front of it, the hand's body (above the bar)
+        not into it, ``clearance_margin`` above the floor; of the pitches at which the closed
+        fingers fit the measured gap, the one that puts their front farthest behind the bar's
+        front. None where none fits (event ``hook_down``)."""
+        hand = self.hand
+        if not hand.hook_down_pitches or hand.hook_down_width <= 0.0:
+            return None
+        panel_x = float(handle.front_x + shape.protrusion)
+        fingers = self.spec.grasp_profile("vertical")
+        along_bar = orientation_for_handle("vertical")  # the closing axis along world y
+        z = handle.centre[2] - hand.hook_down_depth
+        best, tried = None, []
+        for pitch in hand.hook_down_pitches:
+            across = hand.hook_down_width / max(1e-6, math.sin(math.radians(pitch)))  # at one height (m)
+            if shape.gap < across + 2 * hand.hook_down_margin:
+                tried.append([pitch, "gap"])
+                continue
+            quat = quat_mul(axis_angle_quat((0.0, 1.0, 0.0), math.radians(pitch)), along_bar)
+            x = panel_x - across / 2 - hand.hook_down_margin  # the fingers' back at the margin
+            floor, door = clearances(outline_for(self.spec, fingers), np.array([x, handle.centre[1], z]), quat, panel_x)
+            x_bar = panel_x - shape.gap + across / 2 + hand.hook_down_margin  # the fingers against the bar
+            x = max(x_bar, x + min(0.0, door))  # the body's clearance to the panel is linear in x
+            floor, door = clearances(outline_for(self.spec, fingers), np.array([x, handle.centre[1], z]), quat, panel_x)
+            tried.append([pitch, round(floor, 4), round(door, 4)])
+            if floor < (hand.clearance_margin or 0.0) or door < -1e-6:
+                continue
+            behind = x - across / 2  # the fingers' front, world x
+            if best is None or behind > best[0] + 1e-6:
+                best = (behind, pitch, quat, np.array([x, handle.centre[1], z]))
+        if best is None:
+            result.events.append({"hook_down": None, "tried": tried})
+            return None
+        result.events.append({"hook_down": [best[1], round(best[0] - (panel_x - shape.gap), 4)], "tried": tried})
+        return best[2], best[3], fingers
 
     def _low_handle(self, handle, orientation: str, quat, pos, result: PlanResult):
         """The hand's own way with a handle near the floor (``hands/<name>/planner.json``): pitch the
@@ -229,7 +277,10 @@ class GraspGeometry:
         else at the handle again, nearer then farther than the first try."""
         cfg = self.config.recovery
         deeper = cfg.regrasp_deeper * (g.attempt + 1)
-        if state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
+        if g.style == "hook_down":  # the hook again where it was planned (deeper is the floor)
+            new = GraspChoice(g.style, g.orientation, g.quat, self.state.first_pos.copy(), g.pre, g.closed,
+                              g.attempt + 1, probe=g.probe)
+        elif state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
             pos, quat = state.last_held
             quat = np.asarray(quat, float)
             new = GraspChoice(g.style, g.orientation, quat, np.asarray(pos, float) + deeper * quat_axis_z(quat),

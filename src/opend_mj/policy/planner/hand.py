@@ -84,6 +84,15 @@ class HandPlannerConfig:
     down by the first of these (90 = straight down) at which the hand clears, a gripper's fingers
     opened as little as the bar's half thickness plus ``clearance_bar_margin`` (m).
 
+    ``hook_down_pitches`` (deg below the horizontal, tried in order; empty: never): a horizontal
+    bar near the floor whose grasp pose does not clear (above) is hooked from above instead: the
+    hand points down into the stand-off gap behind the bar, its fingers closed into one hook
+    ``hook_down_width`` (m thick across the bar) and lowered ``hook_down_depth`` (m) below the
+    bar's centre, and pulls the bar out by the back of its fingers (a gripper's body, 20 cm long
+    across a bar, fits neither under a bar 3-6 cm above the floor nor behind it). The first pitch
+    at which the closed fingers fit the gap with ``hook_down_margin`` (m) each side and the hand
+    clears the floor is taken.
+
     ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
     segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
@@ -101,6 +110,10 @@ class HandPlannerConfig:
     clearance_pitches: tuple = ()
     clearance_bar_margin: float = 0.004
     hook_slide: float = 0.0
+    hook_down_pitches: tuple = ()
+    hook_down_width: float = 0.0
+    hook_down_depth: float = 0.005
+    hook_down_margin: float = 0.001
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
@@ -133,11 +146,11 @@ class HandPlannerConfig:
                     raise ValueError(f"{path}: 'clearance_knob_turn' must be true or false, got {value!r}")
                 values[key] = value
                 continue
-            if key == "clearance_pitches":
+            if key in ("clearance_pitches", "hook_down_pitches"):
                 ok = isinstance(value, list) and all(
                     isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 90 for v in value)
                 if not ok:
-                    raise ValueError(f"{path}: 'clearance_pitches' must be a list of degrees in [0, 90], got {value!r}")
+                    raise ValueError(f"{path}: {key!r} must be a list of degrees in [0, 90], got {value!r}")
                 values[key] = tuple(float(v) for v in value)
                 continue
             optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin")

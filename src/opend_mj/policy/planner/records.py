@@ -53,13 +53,17 @@ class PlanResult:
 class GraspChoice:
     """One grasp: the style chosen from the handle's shape, the site pose and the finger targets."""
 
-    style: str  # "hook" (behind a bar with room), "pinch" (a bar close to its panel), "wrap" (a knob)
+    style: str  # "hook" (behind a bar with room), "pinch" (a bar close to its panel), "wrap" (a knob),
+    # "hook_down" (a low bar hooked from above by the closed fingers)
     orientation: str  # the handle's: "horizontal" | "vertical"
     quat: np.ndarray  # grasp-site orientation (world)
     pos: np.ndarray  # grasp-site position (world, m)
     pre: np.ndarray  # finger targets, open
     closed: np.ndarray  # finger targets, closed
     attempt: int = 0
+    #: the direction (world unit vector) the grasp is tested by pulling along; None: back along
+    #: the approach axis (a hand that hooks from above tests by pulling out of the panel instead)
+    probe: np.ndarray | None = None
 
     @property
     def axis(self) -> np.ndarray:

@@ -1,0 +1,82 @@
+"""A horizontal bar near the floor hooked from above (``hook_down_pitches``): the Franka gripper's
+body, 20 cm long across a bar, fits neither under a bar 3-6 cm above the floor nor behind it, so it
+points its closed fingers down into the stand-off gap behind the bar and pulls the bar out by their
+backs. Synthetic scenes for the choice; a real PartNet-Mobility door (../shared) end to end."""
+
+from __future__ import annotations
+
+from importlib import util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
+#: a door whose 7 mm bar stands 2-5 cm above the floor with 27 mm behind it (measured in depth)
+LOW_BAR_DOOR = ("45403", "joint_1")
+
+
+def _helpers():
+    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
+    module = util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_gripper_hooks_a_low_bar_from_above_where_its_level_grasp_hits_the_floor():
+    from opend_mj.policy.planner.clearance import clearances, outline_for
+    from opend_mj.sim.hands import load_spec
+    from opend_mj.transforms import quat_to_mat
+
+    h = _helpers()
+    spec = load_spec("franka")
+    bar, posts = h._bar(thickness=0.008, gap=0.032, length=0.12, z=0.035)
+    handle, shape, grasp = h._choose("franka", [bar, *posts], bar, "door", kind="door")
+    assert grasp.style == "hook_down"
+    axes = quat_to_mat(grasp.quat)
+    assert axes[2, 2] < -0.6  # the fingers point down
+    assert abs(axes[1, 1]) > 0.99  # the fingers' closing axis along the bar (world y)
+    assert np.allclose(grasp.pre, grasp.closed) and np.allclose(grasp.closed, 0.0)  # one closed hook
+    assert grasp.probe is not None and grasp.probe[0] < -0.99  # tested by pulling out of the panel
+    back, panel = bar[1][0], h.PANEL_X
+    assert back < grasp.pos[0] < panel  # in the gap behind the bar
+    floor, door = clearances(outline_for(spec, grasp.closed), grasp.pos, grasp.quat, panel)
+    assert floor > 0.0 and door >= -1e-6
+    # no gap for the fingers (15 mm): the level grasp stays; 30 cm up: level, fingers open
+    bar, posts = h._bar(thickness=0.008, gap=0.015, length=0.12, z=0.035)
+    assert h._choose("franka", [bar, *posts], bar, "door", kind="door")[2].style != "hook_down"
+    bar, posts = h._bar(thickness=0.008, gap=0.032, length=0.12, z=0.3)
+    high = h._choose("franka", [bar, *posts], bar, "door", kind="door")[2]
+    assert high.style == "hook" and high.probe is None
+    # a hand without hook_down_pitches never hooks from above
+    bar, posts = h._bar(thickness=0.008, gap=0.032, length=0.12, z=0.035)
+    assert h._choose("franka", [bar, *posts], bar, "door", kind="door", hook_down_pitches=())[2].style != "hook_down"
+
+
+def test_hook_down_pitches_are_checked_when_the_hand_file_is_read(tmp_path):
+    from opend_mj.policy.planner import HandPlannerConfig
+
+    path = tmp_path / "planner.json"
+    path.write_text('{"hook_down_pitches": [60, 120]}')
+    with pytest.raises(ValueError, match="hook_down_pitches"):
+        HandPlannerConfig.load(path)
+    path.write_text('{"hook_down_pitches": [80, 60], "hook_down_width": 0.021}')
+    assert HandPlannerConfig.load(path).hook_down_pitches == (80.0, 60.0)
+
+
+@pytest.mark.slow
+def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(tmp_path):
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.evaluation.episode import EpisodeJob
+    from opend_mj.evaluation.runner import run_episode
+
+    cid, joint = LOW_BAR_DOOR
+    if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
+        pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
+    compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
+    rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp_path / "built" / cid), joint=joint,
+                                 split="all", hand="franka", solver="oracle"))
+    assert "error" not in rec, rec.get("error")
+    assert rec["grasp_style"] == "hook_down"
+    assert rec["success"] and rec["range_ratio"] > 0.75, rec
+    assert rec["others_moved"] == []
