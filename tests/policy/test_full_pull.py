@@ -151,3 +151,47 @@ def test_no_push_recovery_without_the_time_it_needs():
     assert planner.recover_door(part, state, result) is False
     assert result.events[-1] == {"push_skipped": {"time_left": pytest.approx(5.0, abs=0.02)}}
     assert planner.door_arc(state) is not None  # the arc is known: only the time held the push back
+
+
+def test_no_push_where_the_camera_sees_the_door_front_not_moving():
+    """Before pushing a lost door open from inside, the planner looks: where too little of the front
+    around the handle is seen coming toward the camera (the door swung wide, edge-on, or never moved
+    while the hand followed its own path), it does not push, and the hand stays where it is; a robot
+    that cannot look again, or ``push_look`` off, pushes as before."""
+    from dataclasses import replace
+    from importlib import util
+    from pathlib import Path
+
+    from opend_mj.policy.perception import estimate_handle
+    from opend_mj.policy.planner import Observation
+
+    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
+    scene = util.module_from_spec(spec)
+    spec.loader.exec_module(scene)
+    view = scene._view()
+    bar, posts = scene._bar(thickness=0.012, gap=0.025, length=0.2, z=0.0)
+    depth = scene._render(view, [bar, *posts])
+    box = scene._box_of(view, *bar)
+
+    def lost_door(config: PlannerConfig, look):
+        part = HeldPart("door", math.radians(90), radius=0.5, hinge_y=-0.5)
+        part.look = look
+        planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
+        planner.state.handle = estimate_handle(box, depth, view, planner.config.perception)
+        planner.state.first = Observation(rgb=None, depth=depth, instruction="door", camera_view=view)
+        state = PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]))
+        for a in np.linspace(0.0, math.radians(40), 20):  # a held track 40 degrees round its hinge
+            part.opening = float(a)
+            state.track.append(part.site_pos())
+        state.turned = 40.0
+        result = PlanResult(stage_reached="pull", failed_stage=None)
+        return planner.recover_door(part, state, result), result, part
+
+    pushed, result, part = lost_door(PlannerConfig(), lambda: depth.copy())  # the front as at the start
+    assert pushed is False and part.n_steps == 0
+    assert result.events[-1] == {"push_skipped": {"front_seen": None}}
+    config = PlannerConfig()
+    off = replace(config, recovery=replace(config.recovery, push_look=False))
+    for cfg, look in ((off, lambda: depth.copy()), (config, None)):
+        pushed, result, part = lost_door(cfg, look)
+        assert pushed is True and part.n_steps > 0 and result.pushed

@@ -257,6 +257,10 @@ class RecoveryConfig:
     push_radius_fraction: float = 0.85
     push_speed_factor: float = 2.0
     push_to_deg: float = 125.0
+    #: look before pushing: no push where too little of the door's front is seen moving, and the
+    #: hand goes round the free edge ahead of the angle the front is seen turned where that is
+    #: more than the held path's (``Planner.door_seen_turn``)
+    push_look: bool = True
 
 
 @dataclass(frozen=True)

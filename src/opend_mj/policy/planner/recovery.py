@@ -19,7 +19,7 @@ from opend_mj.transforms import mat_to_quat
 
 class PushRecovery:
     """The push recovery of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
-    ``state``, :meth:`closed_profile`, :meth:`_stage`, :meth:`_time_left`)."""
+    ``state``, :meth:`closed_profile`, :meth:`front_seen`, :meth:`_stage`, :meth:`_time_left`)."""
 
     def door_arc(self, state: PullState):
         """(hinge (x, y), the handle's radius (m), its start angle (rad), the sense of opening
@@ -64,6 +64,10 @@ class PushRecovery:
         if math.degrees(opened) < cfg.push_min_turn or not (cfg.push_radius_range[0] <= radius <= cfg.push_radius_range[1]):
             result.events.append({"push_skipped": {"opened_deg": round(math.degrees(opened), 1), "radius": round(radius, 3)}})
             return False
+        seen = self.door_seen_turn(robot)
+        if seen == "unseen":
+            result.events.append({"push_skipped": {"front_seen": None}})
+            return False
         p0 = state.track[0]
         self._stage(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
                     opened_deg=round(math.degrees(opened), 1))
@@ -83,7 +87,9 @@ class PushRecovery:
         fist = self.closed_profile("vertical")
         site, squat = robot.site_pose()
         out = radius + cfg.push_clearance
-        edge = opened + math.radians(cfg.push_edge_deg)
+        # round the edge ahead of the door as far as it is known to have turned: by the held path or
+        # as seen (a grip that slid along the bar leaves a path that turned less than the door)
+        edge = max(opened, seen or 0.0) + math.radians(cfg.push_edge_deg)
         speed = self.config.approach.approach_speed * cfg.push_speed_factor
         # round the free edge: out beyond it, across into the gap, in behind the door
         b = point(out, edge)
@@ -105,6 +111,22 @@ class PushRecovery:
         result.pushed = True
         result.events.append({"pushed_to_deg": round(math.degrees(phi), 1)})
         return True
+
+
+    def door_seen_turn(self, robot):
+        """Look before pushing: how far (rad) the door's front is seen turned across
+        (:func:`~opend_mj.policy.perception.front_motion`: the tangent of a side door's angle);
+        "unseen" where too little of the front around the handle is seen coming toward the
+        camera: the door has either swung wide (edge-on to the camera, its place showing the
+        cabinet's inside) or never moved (the hand followed its own path, not the door's), and a
+        push from inside helps in neither case (one that meets a door swinging on by itself
+        shuts it). None where the robot cannot look again or ``push_look`` is off."""
+        if not self.config.recovery.push_look or getattr(robot, "look", None) is None:
+            return None
+        seen = self.front_seen(robot, robot.site_pos())
+        if seen is None:
+            return "unseen"
+        return math.atan(abs(seen["across"]))
 
 
 def _wrap(a: float) -> float:
