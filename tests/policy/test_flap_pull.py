@@ -266,3 +266,26 @@ def test_a_procedural_flap_opens_with_the_planner(tmp_path, index, cid, joint):
         old = run_episode(replace(job, planner_overrides=(("door.flap_pull", False),)))
         side_door.append(old["success"] and old["range_ratio"] >= 0.75)
     assert not all(side_door)  # pulled as a side door, not both hands open it this far
+
+
+def test_a_tall_flap_is_seen_at_the_second_look():
+    """A drop-down front hinged 85 cm below its handle has turned only 5-6 degrees when the hand
+    came 8 cm out, too little for the first look; the second, at 16 cm, sees it and the flap is pulled
+    along its circle. With one look only it is not seen as a flap."""
+    from opend_mj.policy.perception import HandleEstimate
+
+    def pull(config):
+        part = LooseFlap(-1.0, 0.85, math.radians(95.0))
+        planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
+        planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
+                                              size=(0.2, 0.016), front_x=PANEL_X - 0.04, panel_x=PANEL_X)
+        planner.state.first = Observation(rgb=None, depth=part.look(), instruction="door", camera_view=_flap_view())
+        quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
+        g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
+        result = PlanResult(stage_reached="pull", failed_stage=None)
+        planner.pull(part, g, True, PullState(quat0=quat), result)
+        return [e["flap"] for e in result.events if "flap" in e]
+
+    seen = pull(PlannerConfig())
+    assert seen and seen[0]["hinge"] == "bottom" and seen[0]["out"] >= 0.15, seen
+    assert not pull(PlannerConfig().override({"door.flap_look_distances": (0.08,)}))

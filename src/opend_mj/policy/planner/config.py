@@ -189,9 +189,9 @@ class DoorConfig:
     flap_min_radius_share: float = 0.5
     flap_max_turn_deg: float = 12.0
     #: a flap seen by the camera (a hand that holds too loosely to record a held path): one look
-    #: once the site came ``flap_look_distance`` (m) out; the front's shift sloped at least
-    #: ``flap_front_slope`` (m per m) up or down it, at most half that across it
-    flap_look_distance: float = 0.08
+    #: once the site came each of ``flap_look_distances`` (m) out; the front's shift sloped at
+    #: least ``flap_front_slope`` (m per m) up or down it, at most half that across it
+    flap_look_distances: tuple = (0.08, 0.16)
     flap_front_slope: float = 0.1
     tilt_gain: float = 1.0
     #: pull this many degrees beyond the pull direction, in the sense of the turn

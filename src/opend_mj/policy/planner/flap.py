@@ -83,16 +83,18 @@ class FlapSteering:
 
     def _flap_looked(self, robot, site, run, state: PullState, result: PlanResult) -> Flap | None:
         """A flap seen by the camera, for a hand that holds too loosely to record a held path: once
-        per pull state, when the site came ``flap_look_distance`` (m) out, a new depth image shows
+        per pull state at each of ``flap_look_distances`` (m) the site came out (a tall flap has
+        turned less at the same distance than a short one), a new depth image shows
         the front around the handle shifted toward the camera more along z than across it (its
         shift's slope up the front at least ``flap_front_slope``, across it at most half that): a
         flap hinged at its top edge where the lower part came out more, else at its bottom edge."""
         cfg = self.config.door
         handle = self.state.handle
-        if state.flap_looked or float(np.linalg.norm(site - run.start)) < cfg.flap_look_distance \
+        looks = cfg.flap_look_distances
+        if state.flap_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.flap_looked] \
                 or (handle is not None and handle.kind == "bar" and handle.orientation == "vertical"):
             return None
-        state.flap_looked = True
+        state.flap_looked += 1
         front = self.front_seen(robot, site)
         if front is None or abs(front["up"]) < cfg.flap_front_slope or abs(front["across"]) > abs(front["up"]) / 2:
             return None
