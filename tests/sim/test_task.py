@@ -266,14 +266,16 @@ def _slerp_every_row(q, target, step_angle, n):
 
 
 def test_slerp_path_repeats_the_arrival_row_and_says_where_it_arrives():
-    from opend_mj.sim.task import _slerp_path
+    from opend_mj.sim.mocap_path import MocapPathPlanner
 
+    planner = MocapPathPlanner(8, 0.75 / 480, 4 / 480)
     rng = np.random.default_rng(0)
     arrived_early = 0
     for _ in range(500):
         q = rng.normal(size=4)
         target = q / np.linalg.norm(q) + rng.normal(size=4) * rng.choice([0.003, 0.02, 0.5])
-        path, writes = _slerp_path(q, target, 4 / 480, 8)
+        path, writes = planner.slerp(q.tolist(), target.tolist())
+        path = np.array(path)
         assert path.tobytes() == _slerp_every_row(q, target, 4 / 480, 8).tobytes()
         assert 1 <= writes <= 8 and (path[writes - 1:] == path[-1]).all()
         arrived_early += writes < 8

@@ -354,7 +354,15 @@ class OpenDCore:
         scene = self.scene
         task = scene.task
         if self.config.lean_step:
-            task.before_step(scene.physics, self.native_action(action), None)
+            if self.config.control == "delta":  # the task's action in parts, checked as before_step does
+                pos, quat, fingers = self.adapter.delta_parts(action, *task.mocap_views)
+                if not math.isfinite(sum(pos) + sum(quat.tolist()) + sum(fingers.tolist())):
+                    native = np.concatenate([pos, quat, fingers])
+                    if not np.isfinite(native).all():
+                        raise ValueError(f"action has non-finite values: {native}")
+                task.apply_action(pos, quat, fingers)
+            else:
+                task.before_step(scene.physics, self.native_action(action), None)
             warnings = task.fast_substeps(scene.physics, cameras=self.config.obs_mode != "state")
             data = scene._data
             if not warnings and not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all():
