@@ -82,7 +82,7 @@ class ActionAdapter:
         clipped = self._clipped  # float64: the clip of a float32 action is that of its float64 copy
         np.minimum(np.maximum(a, self._unit_low, out=clipped), self._unit_high, out=clipped)
         values = clipped.tolist()
-        px, py, pz = np.asarray(mocap_pos, float).tolist()
+        px, py, pz = (mocap_pos if type(mocap_pos) is np.ndarray else np.asarray(mocap_pos, float)).tolist()
         sp, sr = self.step_pos, self.step_rot
         ax, ay, az = values[3] * sr, values[4] * sr, values[5] * sr
         rotvec = np.array((ax, ay, az))
@@ -94,7 +94,7 @@ class ActionAdapter:
             s = float(np.sin(half))
             w1, x1, y1, z1 = (float(np.cos(half)), s * (ax / angle / norm), s * (ay / angle / norm),
                               s * (az / angle / norm))
-            w2, x2, y2, z2 = np.asarray(mocap_quat, float).tolist()
+            w2, x2, y2, z2 = (mocap_quat if type(mocap_quat) is np.ndarray else np.asarray(mocap_quat, float)).tolist()
             quat = np.array((w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
                              w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2))
             quat /= math.sqrt(quat.dot(quat))
@@ -106,7 +106,15 @@ class ActionAdapter:
         np.multiply(fingers, 0.5, out=fingers)
         np.multiply(fingers, self._span, out=fingers)
         np.add(self.finger_low, fingers, out=fingers)
-        return [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp], quat, fingers
+        pos = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp]
+        # the task's check of a native action (`OpenCabinetTask.before_step`): a finger target is
+        # finite where its clipped action is, so one sum tests all (a sum of finite numbers can
+        # only overflow, which the full test then clears)
+        if not math.isfinite(sum(pos) + sum(quat.tolist()) + sum(values)):
+            native = np.concatenate([pos, quat, fingers])
+            if not np.isfinite(native).all():
+                raise ValueError(f"action has non-finite values: {native}")
+        return pos, quat, fingers
 
     def from_delta_reference(self, action, mocap_pos, mocap_quat) -> np.ndarray:
         """`from_delta` written with the rotation helpers (the reference it is tested against)."""

@@ -137,6 +137,8 @@ class RewardProbe:
         self._box_cache: tuple = (None, None)  # (pose bytes of the handle bodies, (lo, hi))
         self.start_distance = 0.0
         self._zeros3 = np.zeros(3)
+        self._outside = np.zeros(3)  # `distance`'s per-axis distances outside the box
+        self._site_pos = self._data.site_xpos[self._site]  # a view of the grasp site's position
 
     def handle_geoms(self, joint: str) -> np.ndarray:
         ids = self._handles.get(joint)
@@ -225,11 +227,36 @@ class RewardProbe:
         return pts.min(axis=0), pts.max(axis=0)
 
     def distance(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
-        """Grasp site to the instructed handle's box (m; 0 inside it)."""
+        """Grasp site to the instructed handle's box (m; 0 inside it).
+
+        `distance_reference` in plain floats: per axis the larger of (lo - site, site - hi), at least
+        0 (numpy's maximum of finite numbers; a zero's sign is squared away), then numpy's dot of
+        those three numbers, as the reference. Non-finite inputs take the reference's path.
+        """
+        lo, hi = box if box is not None else self.target_box()
+        s0, s1, s2 = self._site_pos.tolist()
+        l0, l1, l2 = lo.tolist()
+        h0, h1, h2 = hi.tolist()
+        if not math.isfinite(s0 + s1 + s2 + l0 + l1 + l2 + h0 + h1 + h2):
+            return self.distance_reference((lo, hi))
+        outside = self._outside
+        a, b = l0 - s0, s0 - h0
+        a = a if a > b else b
+        outside[0] = a if a > 0.0 else 0.0
+        a, b = l1 - s1, s1 - h1
+        a = a if a > b else b
+        outside[1] = a if a > 0.0 else 0.0
+        a, b = l2 - s2, s2 - h2
+        a = a if a > b else b
+        outside[2] = a if a > 0.0 else 0.0
+        return math.sqrt(outside @ outside)  # np.sqrt of a float: the same correctly rounded root
+
+    def distance_reference(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+        """`distance` with numpy's elementwise maximum (the reference)."""
         lo, hi = box if box is not None else self.target_box()
         site = self._data.site_xpos[self._site]
         outside = np.maximum(self._zeros3, np.maximum(lo - site, site - hi))  # = np.maximum(0.0, ...)
-        return math.sqrt(outside @ outside)  # np.sqrt of a float: the same correctly rounded root
+        return float(np.sqrt(outside @ outside))
 
     def contact(self) -> bool:
         data = self._data
@@ -252,7 +279,8 @@ class RewardProbe:
         values = {j: float(qpos[a]) for j, a in self._qpos.items()}
         outcome = task.checker.check_values(values)
         others = [t.range_ratio(values[t.joint]) for t in task.cabinet.targets if t.joint != target.joint]
-        return RewardTerms(distance=self.distance(self.handle_box_reference()), start_distance=self.start_distance,
+        return RewardTerms(distance=self.distance_reference(self.handle_box_reference()),
+                           start_distance=self.start_distance,
                            contact=self.contact(),
                            open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
                            success=bool(outcome.success), others_moved=bool(outcome.others_moved),
