@@ -18,6 +18,7 @@ ABSOLUTE_ROOT_LOW = (-3.0, -3.0, 0.0)
 ABSOLUTE_ROOT_HIGH = (3.0, 3.0, 3.0)
 
 
+
 class ActionAdapter:
     """Turns a normalised delta action into the task's own action (see the module doc)."""
 
@@ -86,7 +87,7 @@ class ActionAdapter:
         sp, sr = self.step_pos, self.step_rot
         ax, ay, az = values[3] * sr, values[4] * sr, values[5] * sr
         rotvec = np.array((ax, ay, az))
-        angle = math.sqrt(rotvec @ rotvec)
+        angle = math.sqrt(rotvec.dot(rotvec))  # what rotvec @ rotvec gives (numpy's dot), cheaper
         if angle > 1e-12:
             axis = np.array((ax / angle, ay / angle, az / angle))
             norm = math.sqrt(axis.dot(axis))

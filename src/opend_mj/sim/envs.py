@@ -366,7 +366,8 @@ class OpenDCore:
                 task.before_step(scene.physics, self.native_action(action), None)
             warnings = task.fast_substeps(scene.physics, cameras=self._rgbd)
             data = scene._data
-            if not warnings and not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all():
+            qpos = data.qpos
+            if not warnings and not math.isfinite(float(qpos.dot(qpos))) and not np.isfinite(qpos).all():
                 warnings = ["NaN"]
             if warnings:
                 task.physics_warnings.append({"time": float(data.time), "warnings": warnings})

@@ -54,7 +54,7 @@ class MocapPathPlanner:
         dx, dy, dz = tx - px, ty - py, tz - pz
         delta = self._delta
         delta[0], delta[1], delta[2] = dx, dy, dz
-        dist = math.sqrt(float(delta @ delta))
+        dist = math.sqrt(float(delta.dot(delta)))  # delta @ delta: numpy's dot, without matmul's overhead
         writes = 0
         rows = None
         if dist > 1e-12:
@@ -70,7 +70,7 @@ class MocapPathPlanner:
             writes = len(rows)
             if writes < n:
                 rows.extend([rows[-1]] * (n - writes))
-        cos = float(quat @ target_quat)
+        cos = float(quat.dot(target_quat))
         if abs(cos) > 1.0 - 1e-12:  # no rotation: the common case of the planner
             quat[...] = target_quat
             return rows, None, writes

@@ -249,7 +249,8 @@ class RewardProbe:
         a, b = l2 - s2, s2 - h2
         a = a if a > b else b
         outside[2] = a if a > 0.0 else 0.0
-        return math.sqrt(outside @ outside)  # np.sqrt of a float: the same correctly rounded root
+        # outside @ outside is numpy's dot, as .dot; np.sqrt of a float: the same correctly rounded root
+        return math.sqrt(outside.dot(outside))
 
     def distance_reference(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
         """`distance` with numpy's elementwise maximum (the reference)."""

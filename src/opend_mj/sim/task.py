@@ -247,7 +247,7 @@ class OpenCabinetTask(composer.Task):
         target position (3 floats), quaternion (4-array, any norm above 1e-6) and finger targets
         (array; the actuators' units). Clips the root target to the workspace and the finger targets
         to the actuators' ranges, plans the mocap's path over the substeps, sets the controls."""
-        norm = math.sqrt(float(quat @ quat))
+        norm = math.sqrt(float(quat.dot(quat)))  # quat @ quat (numpy's dot, without matmul's overhead)
         if norm < 1e-6:
             raise ValueError("action quaternion has zero norm")
         x, y, z = pos
@@ -468,7 +468,7 @@ class OpenDEnvironment(composer.Environment):
         else:
             obs = collections.OrderedDict((name, np.array(read())) for name, read in readers)
         data = physics.data.ptr
-        if warnings or (not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all()):
+        if warnings or (not math.isfinite(float(data.qpos.dot(data.qpos))) and not np.isfinite(data.qpos).all()):
             task.physics_warnings.append({"time": float(data.time), "warnings": warnings or ["NaN"]})
             reward, discount, terminating = 0.0, 0.0, True
         else:
