@@ -37,6 +37,7 @@ class ActionAdapter:
         self._span = self.finger_high - self.finger_low
         # buffers of `delta_parts`: the clipped action and the finger targets
         self._clipped = np.zeros(self.delta_dim)
+        self._delta_shape = (self.delta_dim,)
         self._clipped_fingers = self._clipped[6:]
         self._fingers = np.zeros(self.n_fingers)
 
@@ -78,7 +79,7 @@ class ActionAdapter:
         to the bit.
         """
         a = action if type(action) is np.ndarray and action.dtype.kind == "f" else np.asarray(action, float)
-        if a.shape != (self.delta_dim,):
+        if a.shape != self._delta_shape:
             raise ValueError(f"delta action has shape {a.shape}, expected ({self.delta_dim},)")
         clipped = self._clipped  # float64: the clip of a float32 action is that of its float64 copy
         np.minimum(np.maximum(a, self._unit_low, out=clipped), self._unit_high, out=clipped)

@@ -132,7 +132,8 @@ class RewardProbe:
         self._targets = [task.cabinet.target(j) for j in self._joints]
         self._addresses = np.array([self._qpos[j] for j in self._joints], dtype=int)
         #: (joint, handle geom ids, their corners in the geom frame, handle mask, their bodies, views
-        #: of those bodies' xpos and xquat rows)
+        #: of those bodies' xpos and xquat rows, (per-target ratio constants, the instructed
+        #: target's open span and range span))
         self._bound: tuple | None = None
         self._box_cache: tuple = (None, None)  # (pose bytes of the handle bodies, (lo, hi))
         self.start_distance = 0.0
@@ -165,6 +166,8 @@ class RewardProbe:
             poses = [row for b in bodies for row in (self._data.xpos[b], self._data.xquat[b])]
             # per target in `_joints` order: (is the instructed one, closed value, open sign, range span)
             ratios = [(t.joint == joint, t.closed, t.open_sign, t.range_span) for t in self._targets]
+            target = self.task.cabinet.target(joint)
+            ratios = (ratios, target.open_span, target.range_span)  # and the instructed target's spans
             self._bound = bound = (joint, np.asarray(ids, dtype=int), local, mask, bodies, poses, ratios)
             self._box_cache = (None, None)
         return bound
@@ -293,7 +296,7 @@ class RewardProbe:
         computed this step."""
         task = self.task
         target = task.target
-        _, _, _, handle_mask, _, _, ratios = self._bind(target.joint)
+        _, _, _, handle_mask, _, _, (ratios, open_span, range_span) = self._bind(target.joint)
         # what checker.check_values computes (Target.opening, open_ratio and range_ratio: the same
         # operations on the same joint values), without its dict and Outcome, and each other
         # target's range ratio once
@@ -308,7 +311,7 @@ class RewardProbe:
                 others_range = max(others_range, ratio) if others else ratio
                 others = True
         opening = max(0.0, (q - target.closed) * target.open_sign)
-        open_ratio = opening / target.open_span
+        open_ratio = opening / open_span
         if geom1 is not None and len(geom1):
             hand = self._hand_mask
             contact = bool(np.any((hand[geom1] & handle_mask[geom2]) | (hand[geom2] & handle_mask[geom1])))
@@ -317,4 +320,4 @@ class RewardProbe:
         checker = task.checker
         return RewardTerms(self.distance(box), self.start_distance, contact, open_ratio, others_range,
                            open_ratio > checker.threshold, others and others_range > checker.moved_threshold,
-                           0.0, 0.0, 0.0, opening / target.range_span)
+                           0.0, 0.0, 0.0, opening / range_span)
