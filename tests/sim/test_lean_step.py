@@ -188,6 +188,8 @@ def test_delta_actions_give_the_reference_task_action_to_the_bit():
         for pos, quat, _, _ in _random_poses(rng, 300):
             action = rng.uniform(-1.3, 1.3, adapter.delta_dim)
             action[3:6] *= rng.choice([0.0, 1e-14, 1.0])  # no turn, a turn below 1e-12 rad, a turn
+            if rng.random() < 0.2:  # fingers at and just above the bottom of their range
+                action[6:] = rng.choice([-1.0, np.nextafter(-1.0, 0.0), -1.0 + 2**-30], adapter.n_fingers)
             for a in (action, action.astype(np.float32), action.tolist()):
                 ref = adapter.from_delta_reference(a, pos, quat)
                 assert adapter.from_delta(a, pos, quat).tobytes() == ref.tobytes()

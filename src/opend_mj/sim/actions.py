@@ -34,7 +34,7 @@ class ActionAdapter:
         self.step_pos = task_config.max_root_speed / task_config.control_hz
         self.step_rot = task_config.max_root_angular_speed / task_config.control_hz
         self._unit_low, self._unit_high = -np.ones(self.delta_dim), np.ones(self.delta_dim)
-        self._span = self.finger_high - self.finger_low
+        self._half_span = 0.5 * (self.finger_high - self.finger_low)
         # buffers of `delta_parts`: the clipped action and the finger targets
         self._clipped = np.zeros(self.delta_dim)
         self._delta_shape = (self.delta_dim,)
@@ -102,11 +102,11 @@ class ActionAdapter:
             quat /= math.sqrt(quat.dot(quat))
         else:
             quat = np.array(mocap_quat, float)
-        # lo + (u + 1) * 0.5 * span, one operation at a time into a buffer (the same roundings)
+        # lo + (u + 1) * 0.5 * span as lo + (u + 1) * (0.5 * span), into a buffer: halving is exact
+        # (u + 1 is 0 or at least 2**-53, never subnormal), so both round the same product
         fingers = self._fingers
         np.add(self._clipped_fingers, 1.0, out=fingers)
-        np.multiply(fingers, 0.5, out=fingers)
-        np.multiply(fingers, self._span, out=fingers)
+        np.multiply(fingers, self._half_span, out=fingers)
         np.add(self.finger_low, fingers, out=fingers)
         pos = [px + values[0] * sp, py + values[1] * sp, pz + values[2] * sp]
         # the task's check of a native action (`OpenCabinetTask.before_step`): a finger target is
