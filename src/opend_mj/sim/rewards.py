@@ -186,7 +186,12 @@ class RewardProbe:
 
     def target_box(self) -> tuple[np.ndarray, np.ndarray]:
         """`handle_box` of the instructed target, the cached arrays themselves (not to be changed)."""
-        key = b"".join([row.tobytes() for row in self._bind(self.task.target.joint)[5]])
+        joint, bound = self.task.target.joint, self._bound
+        if bound is None or bound[0] != joint:
+            bound = self._bind(joint)
+        rows = bound[5]
+        key = (rows[0].tobytes() + rows[1].tobytes() if len(rows) == 2  # one body: the usual case
+               else b"".join([row.tobytes() for row in rows]))
         cached_key, box = self._box_cache
         if key != cached_key:
             box = self._handle_box(self.task.target.joint)
@@ -296,7 +301,10 @@ class RewardProbe:
         computed this step."""
         task = self.task
         target = task.target
-        _, _, _, handle_mask, _, _, (ratios, open_span, range_span) = self._bind(target.joint)
+        bound = self._bound
+        if bound is None or bound[0] != target.joint:
+            bound = self._bind(target.joint)
+        _, _, _, handle_mask, _, _, (ratios, open_span, range_span) = bound
         # what checker.check_values computes (Target.opening, open_ratio and range_ratio: the same
         # operations on the same joint values), without its dict and Outcome, and each other
         # target's range ratio once

@@ -295,12 +295,17 @@ class OpenCabinetTask(composer.Task):
         writes = self._path_writes if path_pos is not None or path_quat is not None else 0
         if writes:
             mocap_pos, mocap_quat = self.mocap_views
-            for i in range(writes):
-                if path_pos is not None:
+            step = _mujoco.mj_step
+            if path_pos is not None and path_quat is not None:  # moving and turning
+                for i in range(writes):
                     mocap_pos[...] = path_pos[i]
-                if path_quat is not None:
                     mocap_quat[...] = path_quat[i]
-                _mujoco.mj_step(model, data)
+                    step(model, data)
+            else:
+                rows, view = (path_pos, mocap_pos) if path_pos is not None else (path_quat, mocap_quat)
+                for i in range(writes):
+                    view[...] = rows[i]
+                    step(model, data)
         if writes < self._substeps:  # the mocap pose no longer changes (mj_step leaves it alone): one call
             _mujoco.mj_step(model, data, self._substeps - writes)
         _mujoco.mj_kinematics(model, data)
