@@ -40,12 +40,13 @@ def mat_to_quat(m) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
-def mat9_to_quat(m9) -> np.ndarray:
+def mat9_to_quat(m9, out: np.ndarray | None = None) -> np.ndarray:
     """`mat_to_quat` of a row-major 9-vector (MuJoCo's ``xmat`` rows), in plain float arithmetic.
 
     The same operations in the same order as `mat_to_quat` (``np.trace`` sums the diagonal left to
     right; ``np.linalg.norm`` of a vector is ``sqrt(q.dot(q))``), so the same numbers to the bit,
-    several times faster: for per-step observations.
+    several times faster: for per-step observations. ``out``: a 4-array to write the quaternion
+    into (returned), instead of a new one.
     """
     m00, m01, m02, m10, m11, m12, m20, m21, m22 = m9.tolist()
     t = m00 + m11 + m22
@@ -61,9 +62,15 @@ def mat9_to_quat(m9) -> np.ndarray:
     else:
         s = math.sqrt(1.0 + m22 - m00 - m11) * 2
         q = [(m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s]
-    q = np.array(q)
-    q /= math.sqrt(q.dot(q))
-    return -q if q[0] < 0 else q
+    if out is None:
+        q = np.array(q)
+        q /= math.sqrt(q.dot(q))
+        return -q if q[0] < 0 else q
+    out[:] = q
+    out /= math.sqrt(out.dot(out))
+    if out[0] < 0:
+        np.negative(out, out=out)
+    return out
 
 
 def quat_mul(a, b) -> np.ndarray:

@@ -141,3 +141,112 @@ def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):
         assert seen == {False, True}  # the scripted pull crossed 2 % of the range
     finally:
         env.close()
+
+
+def _random_poses(rng, count):
+    """(mocap position, mocap quaternion, target position, target quaternion): targets within one
+    substep, within one control step and beyond it; turns of none, a hair, a step's worth, a lot."""
+    for i in range(count):
+        pos = rng.normal(size=3)
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        reach = (0.0, 1e-4, 0.005, 0.05)[i % 4]
+        target = pos + rng.normal(size=3) * reach
+        turn = (0.0, 1e-7, 0.003, 0.5)[(i // 4) % 4]
+        target_quat = quat + rng.normal(size=4) * turn
+        target_quat = -target_quat if i % 7 == 0 else target_quat  # the other sign of the same turn
+        yield pos, quat, target, target_quat / np.linalg.norm(target_quat)
+
+
+def test_mocap_path_planner_gives_the_reference_path_to_the_bit():
+    from opend_mj.sim.mocap_path import MocapPathPlanner, plan_reference
+
+    rng = np.random.default_rng(0)
+    for n, travel, angle in ((8, 0.75 / 480, 4 / 480), (2, 0.75 / 120, 4 / 120), (1, 0.75 / 60, 4 / 60)):
+        planner = MocapPathPlanner(n, travel, angle)
+        kinds = set()
+        for pos, quat, target, target_quat in _random_poses(rng, 400):
+            q_lean, q_ref = quat.copy(), quat.copy()  # both write the target quaternion when not turning
+            rows, quat_rows, writes = planner.plan(pos.copy(), q_lean, target.tolist(), target_quat)
+            ref_pos, ref_quat, ref_writes = plan_reference(pos.copy(), q_ref, target, target_quat, n, travel, angle)
+            assert writes == ref_writes and q_lean.tobytes() == q_ref.tobytes()
+            for mine, ref in ((rows, ref_pos), (quat_rows, ref_quat)):
+                assert (mine is None) == (ref is None)
+                if mine is not None:
+                    assert np.array(mine).tobytes() == ref.tobytes()
+            kinds.add((rows is None, quat_rows is None, writes < n))
+        assert len(kinds) >= (5 if n > 1 else 3)  # still, moving, turning, arriving early, ...
+
+
+def test_delta_actions_give_the_reference_task_action_to_the_bit():
+    from opend_mj.sim.actions import ActionAdapter
+    from opend_mj.sim.task import TaskConfig
+
+    for hand in ("allegro", "franka"):
+        adapter = ActionAdapter(hand, TaskConfig())
+        rng = np.random.default_rng(1)
+        for pos, quat, _, _ in _random_poses(rng, 300):
+            action = rng.uniform(-1.3, 1.3, adapter.delta_dim)
+            action[3:6] *= rng.choice([0.0, 1e-14, 1.0])  # no turn, a turn below 1e-12 rad, a turn
+            if rng.random() < 0.2:  # fingers at and just above the bottom of their range
+                action[6:] = rng.choice([-1.0, np.nextafter(-1.0, 0.0), -1.0 + 2**-30], adapter.n_fingers)
+            for a in (action, action.astype(np.float32), action.tolist()):
+                ref = adapter.from_delta_reference(a, pos, quat)
+                assert adapter.from_delta(a, pos, quat).tobytes() == ref.tobytes()
+                p, q, f = adapter.delta_parts(a, pos, quat)
+                assert np.concatenate([p, q, f]).tobytes() == ref.tobytes()
+        bad = np.zeros(adapter.delta_dim)
+        bad[7] = np.nan
+        with pytest.raises(ValueError, match="non-finite"):
+            adapter.delta_parts(bad, pos, quat)
+        with pytest.raises(ValueError, match="shape"):
+            adapter.delta_parts(bad[:-1], pos, quat)
+
+
+def test_root_targets_on_and_beyond_the_workspace_are_clipped_as_numpy_clips(small_dataset):
+    env = gym.make(ENV_ID, cabinets=str(small_dataset), split="all", hand="franka").unwrapped
+    try:
+        env.reset(seed=1)
+        task = env.core.scene.task
+        lo, hi = task._workspace
+        fingers = np.asarray(task.hand.spec.open_pose, float)
+        rng = np.random.default_rng(2)
+        for k in range(60):
+            pos = rng.uniform(lo - 0.5, hi + 0.5)
+            if k % 2:  # exactly on a bound
+                pos[k % 3] = lo[k % 3] if k % 4 == 1 else hi[k % 3]
+            quat = rng.normal(size=4)
+            task.apply_action(pos.tolist(), quat, fingers)
+            assert np.array(task._root_target[0]).tobytes() == np.minimum(np.maximum(pos, lo), hi).tobytes()
+            assert task._root_target[1].tobytes() == (quat / np.sqrt(quat @ quat)).tobytes()
+        with pytest.raises(ValueError, match="zero norm"):
+            task.apply_action(pos.tolist(), np.zeros(4), fingers)
+    finally:
+        env.close()
+
+
+def test_distance_to_the_handle_box_matches_the_reference_to_the_bit(small_dataset):
+    env = gym.make(ENV_ID, cabinets=str(small_dataset), split="all", hand="franka").unwrapped
+    try:
+        env.reset(seed=0)
+        probe = env.core.scene.probe
+        site = probe._site_pos
+        saved = site.copy()
+        rng = np.random.default_rng(3)
+        lo0, hi0 = probe.target_box()
+        inside = 0
+        for k in range(300):
+            lo = lo0 + rng.normal(size=3) * 0.01
+            hi = lo + np.abs(rng.normal(size=3)) * 0.05
+            site[:] = lo + (hi - lo) * rng.uniform(-1.0, 2.0, 3)
+            if k % 5 == 0:
+                site[k % 3] = (lo[k % 3], hi[k % 3])[k % 2]  # on a face
+            if k == 7:
+                site[1] = np.nan
+            mine, ref = probe.distance((lo, hi)), probe.distance_reference((lo, hi))
+            assert np.array(mine).tobytes() == np.array(ref).tobytes(), (k, mine, ref)
+            inside += mine == 0.0
+        site[:] = saved
+        assert 10 < inside < 290
+    finally:
+        env.close()

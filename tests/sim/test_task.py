@@ -266,14 +266,16 @@ def _slerp_every_row(q, target, step_angle, n):
 
 
 def test_slerp_path_repeats_the_arrival_row_and_says_where_it_arrives():
-    from opend_mj.sim.task import _slerp_path
+    from opend_mj.sim.mocap_path import MocapPathPlanner
 
+    planner = MocapPathPlanner(8, 0.75 / 480, 4 / 480)
     rng = np.random.default_rng(0)
     arrived_early = 0
     for _ in range(500):
         q = rng.normal(size=4)
         target = q / np.linalg.norm(q) + rng.normal(size=4) * rng.choice([0.003, 0.02, 0.5])
-        path, writes = _slerp_path(q, target, 4 / 480, 8)
+        path, writes = planner.slerp(q.tolist(), target.tolist())
+        path = np.array(path)
         assert path.tobytes() == _slerp_every_row(q, target, 4 / 480, 8).tobytes()
         assert 1 <= writes <= 8 and (path[writes - 1:] == path[-1]).all()
         arrived_early += writes < 8
@@ -296,10 +298,13 @@ def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep
         mid = task._mocap_id
         copy = mujoco.MjData(model)
         merged = 0
+        kinds = set()
         for k in range(60):
             # toward the cabinet from where the mocap is: within its top speed (1.25 cm per control
             # step) on two steps of three, beyond it on the third; turning a little, or not at all
             delta = np.array([0.002 + 0.006 * (k % 3), 0.001 * np.sin(k), 0.0])
+            if k % 5 == 4:  # turning where it stands
+                delta = np.zeros(3)
             quat = quat + 0.004 * (k % 4) * np.array([np.cos(k * 0.1), 0, 0, np.sin(k * 0.1)])
             action = task.make_action(data.mocap_pos[mid] + delta, quat / np.linalg.norm(quat),
                                       task.hand.spec.open_pose)
@@ -313,10 +318,12 @@ def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep
                 mujoco.mj_step(model, copy)
             mujoco.mj_kinematics(model, copy)
             merged += task._path_writes < task._substeps
+            kinds.add((task._path_pos is None, task._path_quat is None))
             task.fast_substeps(physics, cameras=False)
             for field in ("qpos", "qvel", "act", "mocap_pos", "mocap_quat", "xpos", "qacc_warmstart"):
                 assert getattr(data, field).tobytes() == getattr(copy, field).tobytes(), (k, field)
             assert data.time == copy.time
         assert merged > 10  # the merged tail was exercised
+        assert {(False, False), (False, True), (True, False)} <= kinds  # moving and turning, or one of them
     finally:
         env.close()

@@ -51,15 +51,25 @@ class Target:
         """Joint displacement in the opening direction (m or rad), 0 when closed."""
         return (q - self.closed) * self.open_sign
 
+    @property
+    def open_span(self) -> float:
+        """What `open_ratio` divides the opening by: the drawer's length (m) or pi (rad, a door)."""
+        if self.kind == "drawer":
+            return max(self.drawer_length or self.open_travel, 1e-9)
+        return math.pi
+
+    @property
+    def range_span(self) -> float:
+        """What `range_ratio` divides the opening by: the joint's travel to fully open (m or rad)."""
+        return max(self.open_travel, 1e-9)
+
     def open_ratio(self, q: float) -> float:
         """The paper's open ratio: drawer delta / drawer length, door angle / 180 degrees."""
-        if self.kind == "drawer":
-            return max(0.0, self.opening(q)) / max(self.drawer_length or self.open_travel, 1e-9)
-        return max(0.0, self.opening(q)) / math.pi
+        return max(0.0, self.opening(q)) / self.open_span
 
     def range_ratio(self, q: float) -> float:
         """Fraction of the joint range opened (the original code's measure, before doubling for doors)."""
-        return max(0.0, self.opening(q)) / max(self.open_travel, 1e-9)
+        return max(0.0, self.opening(q)) / self.range_span
 
 
 def load_cabinet_info(cabinet_dir: Path) -> dict:

@@ -263,6 +263,8 @@ class OpenDCore:
         self._flat = np.zeros(offset)
         self._rgb = config.obs_mode in ("rgb", "rgbd")
         self._depth = config.obs_mode in ("depth", "rgbd")
+        self._rgbd = config.obs_mode != "state"  # the step brings cameras up to date for rendering
+        self._delta = config.control == "delta"
 
     def set_observation_order(self, keys) -> None:
         """The key order of the observation dicts `observe` returns (e.g. the gymnasium space's).
@@ -274,6 +276,9 @@ class OpenDCore:
         floats = {key: (sl, shape) for key, sl, shape in self._float_keys}
         self._float_plan = [(key, *floats[key]) if len(floats[key][1]) != 1 else (key, floats[key][0], None)
                             for key in self._order if key in floats]
+        #: every float key is a flat slice: (key, slice) pairs, no reshapes
+        self._flat_plan = ([(key, sl) for key, sl, _ in self._float_plan]
+                           if all(shape is None for _, _, shape in self._float_plan) else None)
         #: every key is a float of the vector (state mode, one-hot instruction): the views alone
         self._floats_only = len(self._float_plan) == len(self._order)
 
@@ -353,36 +358,43 @@ class OpenDCore:
             raise RuntimeError("the episode is over (or never started): call reset() first")
         scene = self.scene
         task = scene.task
-        if self.config.lean_step:
-            task.before_step(scene.physics, self.native_action(action), None)
-            warnings = task.fast_substeps(scene.physics, cameras=self.config.obs_mode != "state")
+        c = self.config
+        if c.lean_step:
+            if self._delta:  # the task's action in parts (`delta_parts` checks it as before_step does)
+                task.apply_action(*self.adapter.delta_parts(action, *task.mocap_views))
+            else:
+                task.before_step(scene.physics, self.native_action(action), None)
+            warnings = task.fast_substeps(scene.physics, cameras=self._rgbd)
             data = scene._data
-            if not warnings and not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all():
+            qpos = data.qpos
+            if not warnings and not math.isfinite(float(qpos.dot(qpos))) and not np.isfinite(qpos).all():
                 warnings = ["NaN"]
             if warnings:
                 task.physics_warnings.append({"time": float(data.time), "warnings": warnings})
             last = bool(data.time >= self.task_config.time_limit)
-            terms = scene.fill(self._flat, self.config.privileged)
+            terms = scene.fill(self._flat, c.privileged)
         else:
             last = scene.env.step(self.native_action(action)).last()
             terms = scene.probe.terms()
-        terms = self._judge(terms)
+        if c.range_success is not None:
+            self._judge(terms)
         self.steps += 1
-        warnings = list(task.physics_warnings)
+        warnings = task.physics_warnings
         if warnings:
+            warnings = list(warnings)
             reward, terminated, truncated = 0.0, True, False
         else:
             reward = self._reward(terms)
-            terminated = bool(terms.success and self.config.terminate_on_success)
+            terminated = bool(terms.success and c.terminate_on_success)
             truncated = last and not terminated
         if terminated or truncated:
             self._needs_reset = True
-        if self.config.reward_mode == "sparse":
-            dense_reward(terms, self.config.success_threshold, self.config.dense)
+        if c.reward_mode == "sparse":
+            dense_reward(terms, c.success_threshold, c.dense)
         info = self._info(terms)
         if warnings:
             info["physics_warnings"] = warnings
-        obs = self.observe(dtype, filled=self.config.lean_step) if observe else None
+        obs = self.observe(dtype, filled=c.lean_step) if observe else None
         return obs, reward, terminated, truncated, info
 
     def _judge(self, terms):
@@ -412,7 +424,11 @@ class OpenDCore:
         c, scene = self.config, self.scene
         if filled:
             flat = self._flat.astype(dtype)
-            obs = {key: flat[sl] if shape is None else flat[sl].reshape(shape) for key, sl, shape in self._float_plan}
+            if self._flat_plan is not None:
+                obs = {key: flat[sl] for key, sl in self._flat_plan}
+            else:
+                obs = {key: flat[sl] if shape is None else flat[sl].reshape(shape)
+                       for key, sl, shape in self._float_plan}
             if self._floats_only:
                 return obs
         else:

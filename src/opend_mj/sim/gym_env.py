@@ -67,20 +67,15 @@ class OpenCabinetEnv(gym.Env):
         self.action_names = self.core.action_names()
         self.core.set_observation_order(self.observation_space.spaces)
 
-    def _obs(self, raw: dict) -> dict:
-        """The core's observation in the spaces' dtypes and key order (the core gives float32 views
-        of one vector, rgb uint8 and depth float32, in the space's key order already)."""
-        return raw
-
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         episode_seed = int(seed) if seed is not None else int(self.np_random.integers(2**31 - 1))
         obs, info = self.core.reset(episode_seed, options, dtype=np.float32)
-        return self._obs(obs), info
+        return obs, info  # float32 views of one vector, rgb uint8, depth float32, in the space's key order
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.core.step(action, dtype=np.float32)
-        return self._obs(obs), float(reward), terminated, truncated, info
+        return obs, float(reward), terminated, truncated, info
 
     def render(self):
         return self.core.render()

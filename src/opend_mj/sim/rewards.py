@@ -21,6 +21,7 @@ a hand that never moves gets 0 on every step. ``sparse`` is 1 on a success step,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,7 @@ class DenseRewardConfig:
     others_penalty: float = 0.5
 
 
-@dataclass
+@dataclass(slots=True)
 class RewardTerms:
     """What the dense reward is computed from (also handed out in ``info["reward_terms"]``)."""
 
@@ -128,13 +129,17 @@ class RewardProbe:
         self._qpos: dict[str, int] = {t.joint: int(physics.bind(task.cabinet.joint_element(t.joint)).qposadr)
                                       for t in task.cabinet.targets}
         self._joints = list(self._qpos)
+        self._targets = [task.cabinet.target(j) for j in self._joints]
         self._addresses = np.array([self._qpos[j] for j in self._joints], dtype=int)
         #: (joint, handle geom ids, their corners in the geom frame, handle mask, their bodies, views
-        #: of those bodies' xpos and xquat rows)
+        #: of those bodies' xpos and xquat rows, (per-target ratio constants, the instructed
+        #: target's open span and range span))
         self._bound: tuple | None = None
         self._box_cache: tuple = (None, None)  # (pose bytes of the handle bodies, (lo, hi))
         self.start_distance = 0.0
         self._zeros3 = np.zeros(3)
+        self._outside = np.zeros(3)  # `distance`'s per-axis distances outside the box
+        self._site_pos = self._data.site_xpos[self._site]  # a view of the grasp site's position
 
     def handle_geoms(self, joint: str) -> np.ndarray:
         ids = self._handles.get(joint)
@@ -159,7 +164,11 @@ class RewardProbe:
             bodies = np.unique(self._model.geom_bodyid[ids]) if len(ids) else np.zeros(0, dtype=int)
             # views of those bodies' position and quaternion rows (the box cache's key)
             poses = [row for b in bodies for row in (self._data.xpos[b], self._data.xquat[b])]
-            self._bound = bound = (joint, np.asarray(ids, dtype=int), local, mask, bodies, poses)
+            # per target in `_joints` order: (is the instructed one, closed value, open sign, range span)
+            ratios = [(t.joint == joint, t.closed, t.open_sign, t.range_span) for t in self._targets]
+            target = self.task.cabinet.target(joint)
+            ratios = (ratios, target.open_span, target.range_span)  # and the instructed target's spans
+            self._bound = bound = (joint, np.asarray(ids, dtype=int), local, mask, bodies, poses, ratios)
             self._box_cache = (None, None)
         return bound
 
@@ -177,7 +186,12 @@ class RewardProbe:
 
     def target_box(self) -> tuple[np.ndarray, np.ndarray]:
         """`handle_box` of the instructed target, the cached arrays themselves (not to be changed)."""
-        key = b"".join([row.tobytes() for row in self._bind(self.task.target.joint)[5]])
+        joint, bound = self.task.target.joint, self._bound
+        if bound is None or bound[0] != joint:
+            bound = self._bind(joint)
+        rows = bound[5]
+        key = (rows[0].tobytes() + rows[1].tobytes() if len(rows) == 2  # one body: the usual case
+               else b"".join([row.tobytes() for row in rows]))
         cached_key, box = self._box_cache
         if key != cached_key:
             box = self._handle_box(self.task.target.joint)
@@ -187,7 +201,7 @@ class RewardProbe:
     def _handle_box(self, joint: str) -> tuple[np.ndarray, np.ndarray]:
         """`handle_box` computed now (all handle geoms' box corners in one batched product)."""
         if joint == self.task.target.joint:
-            _, ids, local, _, _, _ = self._bind(joint)
+            _, ids, local, _, _, _, _ = self._bind(joint)
         else:
             ids = self.handle_geoms(joint)
             aabb = self._model.geom_aabb
@@ -221,7 +235,33 @@ class RewardProbe:
         return pts.min(axis=0), pts.max(axis=0)
 
     def distance(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
-        """Grasp site to the instructed handle's box (m; 0 inside it)."""
+        """Grasp site to the instructed handle's box (m; 0 inside it).
+
+        `distance_reference` in plain floats: per axis the larger of (lo - site, site - hi), at least
+        0 (numpy's maximum of finite numbers; a zero's sign is squared away), then numpy's dot of
+        those three numbers, as the reference. Non-finite inputs take the reference's path.
+        """
+        lo, hi = box if box is not None else self.target_box()
+        s0, s1, s2 = self._site_pos.tolist()
+        l0, l1, l2 = lo.tolist()
+        h0, h1, h2 = hi.tolist()
+        if not math.isfinite(s0 + s1 + s2 + l0 + l1 + l2 + h0 + h1 + h2):
+            return self.distance_reference((lo, hi))
+        outside = self._outside
+        a, b = l0 - s0, s0 - h0
+        a = a if a > b else b
+        outside[0] = a if a > 0.0 else 0.0
+        a, b = l1 - s1, s1 - h1
+        a = a if a > b else b
+        outside[1] = a if a > 0.0 else 0.0
+        a, b = l2 - s2, s2 - h2
+        a = a if a > b else b
+        outside[2] = a if a > 0.0 else 0.0
+        # outside @ outside is numpy's dot, as .dot; np.sqrt of a float: the same correctly rounded root
+        return math.sqrt(outside.dot(outside))
+
+    def distance_reference(self, box: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+        """`distance` with numpy's elementwise maximum (the reference)."""
         lo, hi = box if box is not None else self.target_box()
         site = self._data.site_xpos[self._site]
         outside = np.maximum(self._zeros3, np.maximum(lo - site, site - hi))  # = np.maximum(0.0, ...)
@@ -248,37 +288,44 @@ class RewardProbe:
         values = {j: float(qpos[a]) for j, a in self._qpos.items()}
         outcome = task.checker.check_values(values)
         others = [t.range_ratio(values[t.joint]) for t in task.cabinet.targets if t.joint != target.joint]
-        return RewardTerms(distance=self.distance(self.handle_box_reference()), start_distance=self.start_distance,
+        return RewardTerms(distance=self.distance_reference(self.handle_box_reference()),
+                           start_distance=self.start_distance,
                            contact=self.contact(),
                            open_ratio=float(outcome.open_ratio), others_range=max(others, default=0.0),
                            success=bool(outcome.success), others_moved=bool(outcome.others_moved),
                            range_ratio=float(outcome.range_ratio))
 
-    def read(self, geom1: np.ndarray, geom2: np.ndarray, box=None) -> RewardTerms:
+    def read(self, geom1: np.ndarray | None, geom2: np.ndarray | None, box=None) -> RewardTerms:
         """The reward terms of `terms`, from the contacts' geom pairs (``data.contact.geom1/2``, read
-        once per step by the caller) and, optionally, the handle box already computed this step."""
+        once per step by the caller; None: no contacts) and, optionally, the handle box already
+        computed this step."""
         task = self.task
-        target, checker = task.target, task.checker
-        handle_mask = self._bind(target.joint)[3]
-        # what checker.check_values computes (the same Target methods on the same joint values),
-        # without its dict and Outcome, and each other target's range ratio once
-        q, others = 0.0, []
-        for t, value in zip(task.cabinet.targets, self._data.qpos[self._addresses].tolist()):
-            if t.joint == target.joint:
+        target = task.target
+        bound = self._bound
+        if bound is None or bound[0] != target.joint:
+            bound = self._bind(target.joint)
+        _, _, _, handle_mask, _, _, (ratios, open_span, range_span) = bound
+        # what checker.check_values computes (Target.opening, open_ratio and range_ratio: the same
+        # operations on the same joint values), without its dict and Outcome, and each other
+        # target's range ratio once
+        q, others_range, others = 0.0, 0.0, False
+        for (is_target, closed, sign, span), value in zip(ratios, self._data.qpos[self._addresses].tolist()):
+            if is_target:
                 q = value
             else:
-                others.append(t.range_ratio(value))
-        open_ratio = target.open_ratio(q)
-        # the largest other range ratio: others moved when it is above the threshold (range ratios
-        # are never NaN: max(0.0, NaN) is 0.0)
-        others_range = max(others, default=0.0)
-        if len(geom1):
+                # the largest other range ratio: others moved when it is above the threshold (range
+                # ratios are never NaN: max(0.0, NaN) is 0.0)
+                ratio = max(0.0, (value - closed) * sign) / span
+                others_range = max(others_range, ratio) if others else ratio
+                others = True
+        opening = max(0.0, (q - target.closed) * target.open_sign)
+        open_ratio = opening / open_span
+        if geom1 is not None and len(geom1):
             hand = self._hand_mask
             contact = bool(np.any((hand[geom1] & handle_mask[geom2]) | (hand[geom2] & handle_mask[geom1])))
         else:
             contact = False
-        return RewardTerms(distance=self.distance(box), start_distance=self.start_distance, contact=contact,
-                           open_ratio=float(open_ratio), others_range=others_range,
-                           success=bool(open_ratio > checker.threshold),
-                           others_moved=bool(others) and others_range > checker.moved_threshold,
-                           range_ratio=float(target.range_ratio(q)))
+        checker = task.checker
+        return RewardTerms(self.distance(box), self.start_distance, contact, open_ratio, others_range,
+                           open_ratio > checker.threshold, others and others_range > checker.moved_threshold,
+                           0.0, 0.0, 0.0, opening / range_span)

@@ -119,9 +119,7 @@ class SceneReader:
             destination[...] = source
         for destination, source, index in gathers:
             np.take(source, index, out=destination)
-        site_quat[:] = mat9_to_quat(site_xmat)
-        contact = d.contact  # one read of the contact list for touch and the reward's contact term
-        touch[:] = self._touch.vector_from(contact)
+        mat9_to_quat(site_xmat, out=site_quat)
         time[0] = d.time
         box = self.probe.target_box()
         if privileged:
@@ -130,6 +128,11 @@ class SceneReader:
             out[s["handle_pos"]] = (lo + hi) / 2
             out[s["handle_size"]] = hi - lo
             out[s["open_ratio"]] = self.task.open_ratio(self.physics)
+        if not d.ncon:  # nothing touches anything: no touch, no handle contact
+            touch.fill(0.0)
+            return self.probe.read(None, None, box)
+        contact = d.contact  # one read of the contact list for touch and the reward's contact term
+        touch[:] = self._touch.vector_from(contact)
         return self.probe.read(contact.geom1, contact.geom2, box)
 
     # ------------------------------------------------------------------ camera

@@ -9,7 +9,6 @@ threshold (20 % by default; drawer delta / drawer length, door angle / 180 degre
 
 from __future__ import annotations
 
-import bisect
 import math
 import os
 
@@ -28,6 +27,7 @@ from dm_env import specs  # noqa: E402
 from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
+from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 
@@ -135,16 +135,16 @@ class OpenCabinetTask(composer.Task):
         self.checker = SuccessChecker(self.cabinet, self.target, config.success_threshold, config.moved_threshold)
         self._n_fingers = len(self.hand.actuators)
         self._workspace = (lo - config.workspace_margin, hi + config.workspace_margin)
+        self._workspace_lists = tuple(np.asarray(b, float).tolist() for b in self._workspace)
         self._root_target = None
         self._path_pos = self._path_quat = None
         self._substep = 0
         self.start_pose = None
         self.set_timesteps(control_timestep=1.0 / config.control_hz, physics_timestep=config.physics_timestep)
         self._substeps = int(round(1.0 / config.control_hz / config.physics_timestep))
-        #: Distance the mocap may have travelled by the end of each substep (bounded speed).
-        self._substep_travel = np.arange(1, self._substeps + 1, dtype=float)[:, None] * (
-            config.max_root_speed * config.physics_timestep)
-        self._travel_list = self._substep_travel[:, 0].tolist()
+        #: the mocap's poses per substep, at bounded speed (m and rad per substep)
+        self._planner = MocapPathPlanner(self._substeps, config.max_root_speed * config.physics_timestep,
+                                         config.max_root_angular_speed * config.physics_timestep)
         #: Substeps of this control step whose mocap write changes the mocap pose: from there on the
         #: path's rows are all the same (the target is reached), so the rest run in one mj_step call.
         self._path_writes = 0
@@ -240,46 +240,31 @@ class OpenCabinetTask(composer.Task):
         # the fast test: a sum of finite numbers can only overflow, which the full test then clears
         if not math.isfinite(sum(action.tolist())) and not np.isfinite(action).all():
             raise ValueError(f"action has non-finite values: {action}")
-        quat = action[3:7]
-        norm = math.sqrt(float(quat @ quat))
+        self.apply_action(action[:3].tolist(), action[3:7], action[7:])
+
+    def apply_action(self, pos, quat: np.ndarray, fingers: np.ndarray) -> None:
+        """`before_step` for an action already checked (finite, the right shape) and in parts: root
+        target position (3 floats), quaternion (4-array, any norm above 1e-6) and finger targets
+        (array; the actuators' units). Clips the root target to the workspace and the finger targets
+        to the actuators' ranges, plans the mocap's path over the substeps, sets the controls."""
+        norm = math.sqrt(float(quat.dot(quat)))  # quat @ quat (numpy's dot, without matmul's overhead)
         if norm < 1e-6:
             raise ValueError("action quaternion has zero norm")
-        lo, hi = self._workspace
-        self._root_target = (np.minimum(np.maximum(action[:3], lo), hi), quat / norm)
-        self._plan_mocap_path()
+        x, y, z = pos
+        (lx, ly, lz), (hx, hy, hz) = self._workspace_lists
+        if not (lx < x < hx and ly < y < hy and lz < z < hz):  # on or beyond a bound: numpy's clip
+            lo, hi = self._workspace
+            x, y, z = np.minimum(np.maximum(np.array(pos, float), lo), hi).tolist()
+        target_quat = quat / norm
+        self._root_target = ((x, y, z), target_quat)
+        self._path_pos, self._path_quat, self._path_writes = self._planner.plan(
+            *self.mocap_views, (x, y, z), target_quat)
+        self._substep = 0
         lo, hi = self._ctrl_range
         if self._ctrl_view is not None:
-            self._ctrl_view[...] = np.minimum(np.maximum(action[7:], lo), hi)
+            np.minimum(np.maximum(fingers, lo, out=self._ctrl_buffer), hi, out=self._ctrl_view)
         else:
-            self._data.ctrl[self._ctrl_index] = np.minimum(np.maximum(action[7:], lo), hi)
-
-    def _plan_mocap_path(self) -> None:
-        """Mocap poses for each substep of this control step: toward the target at bounded speed.
-
-        ``_path_pos`` / ``_path_quat`` hold one row per substep, or None where the mocap stays put
-        (position reached / no rotation left), which lets the substep loop skip the writes.
-        """
-        pos, quat = self.mocap_views
-        target_pos, target_quat = self._root_target
-        delta = target_pos - pos
-        dist = math.sqrt(float(delta @ delta))
-        writes = 0
-        if dist > 1e-12:
-            self._path_pos = pos + (delta / dist) * np.minimum(self._substep_travel, dist)
-            # rows from the first whose travel reaches dist on are pos + unit * dist, all the same
-            writes = min(bisect.bisect_left(self._travel_list, dist) + 1, self._substeps)
-        else:
-            self._path_pos = None
-        if abs(float(quat @ target_quat)) > 1.0 - 1e-12:  # no rotation: the common case
-            self._path_quat = None
-            quat[...] = target_quat
-        else:
-            self._path_quat, quat_writes = _slerp_path(
-                quat, target_quat, self.config.max_root_angular_speed * self.config.physics_timestep,
-                self._substeps)
-            writes = max(writes, quat_writes)
-        self._path_writes = writes
-        self._substep = 0
+            self._data.ctrl[self._ctrl_index] = np.minimum(np.maximum(fingers, lo), hi)
 
     def before_substep(self, physics, action, random_state):
         i = self._substep
@@ -304,35 +289,33 @@ class OpenCabinetTask(composer.Task):
         raised in this control step.
         """
         model, data = self._model, self._data  # physics's, cached at the episode's start
-        stats = self._warning_stats(data)
-        before = [w.number for w in stats]
+        counts = self._warning_counts  # live view of the instability warnings' counters
+        before = counts.tolist()
         path_pos, path_quat = self._path_pos, self._path_quat
         writes = self._path_writes if path_pos is not None or path_quat is not None else 0
         if writes:
             mocap_pos, mocap_quat = self.mocap_views
-            for i in range(writes):
-                if path_pos is not None:
+            step = _mujoco.mj_step
+            if path_pos is not None and path_quat is not None:  # moving and turning
+                for i in range(writes):
                     mocap_pos[...] = path_pos[i]
-                if path_quat is not None:
                     mocap_quat[...] = path_quat[i]
-                _mujoco.mj_step(model, data)
+                    step(model, data)
+            else:
+                rows, view = (path_pos, mocap_pos) if path_pos is not None else (path_quat, mocap_quat)
+                for i in range(writes):
+                    view[...] = rows[i]
+                    step(model, data)
         if writes < self._substeps:  # the mocap pose no longer changes (mj_step leaves it alone): one call
             _mujoco.mj_step(model, data, self._substeps - writes)
         _mujoco.mj_kinematics(model, data)
         if cameras:
             _mujoco.mj_comPos(model, data)
             _mujoco.mj_camlight(model, data)
-        after = [w.number for w in stats]
+        after = counts.tolist()
         if after == before:  # the common case: no instability warning in this control step
             return []
-        return [_WARNING_NAMES[i] for i, (a, b) in enumerate(zip(after, before)) if a > b]
-
-    def _warning_stats(self, data) -> list:
-        """Live views of MjData's instability warning counters (cached per MjData)."""
-        cached = getattr(self, "_warning_cache", None)
-        if cached is None or cached[0] is not data:
-            self._warning_cache = cached = (data, [data.warning[int(w)] for w in _INSTABILITY_WARNINGS])
-        return cached[1]
+        return [name for name, i in _WARNING_POSITIONS if after[i] > before[i]]
 
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
@@ -356,9 +339,12 @@ class OpenCabinetTask(composer.Task):
         data, first = self._data, int(self._ctrl_index[0])
         contiguous = np.array_equal(self._ctrl_index, np.arange(first, first + len(self._ctrl_index)))
         self._ctrl_view = data.ctrl[first:first + len(self._ctrl_index)] if contiguous else None
+        self._ctrl_buffer = np.zeros(len(self._ctrl_index))
         #: (mocap position, mocap quaternion): views of the mocap body's rows of MjData
         self.mocap_views = (data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id])
         self._model = physics.model.ptr
+        #: a view of MjData's instability warning counters (`_WARNING_SLICE`)
+        self._warning_counts = data.warning.number[_WARNING_SLICE]
 
     def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
@@ -419,6 +405,11 @@ import mujoco as _mujoco  # noqa: E402
 _INSTABILITY_WARNINGS = (_mujoco.mjtWarning.mjWARN_BADQACC, _mujoco.mjtWarning.mjWARN_BADQPOS,
                          _mujoco.mjtWarning.mjWARN_BADQVEL)
 _WARNING_NAMES = [w.name for w in _INSTABILITY_WARNINGS]
+_warning_ids = [int(w) for w in _INSTABILITY_WARNINGS]
+#: the counters of MjData.warning from the first instability warning to the last (a view of them),
+#: and each instability warning's position in it (`_INSTABILITY_WARNINGS` order)
+_WARNING_SLICE = slice(min(_warning_ids), max(_warning_ids) + 1)
+_WARNING_POSITIONS = [(name, i - min(_warning_ids)) for name, i in zip(_WARNING_NAMES, _warning_ids)]
 
 
 class OpenDEnvironment(composer.Environment):
@@ -482,7 +473,7 @@ class OpenDEnvironment(composer.Environment):
         else:
             obs = collections.OrderedDict((name, np.array(read())) for name, read in readers)
         data = physics.data.ptr
-        if warnings or (not math.isfinite(float(data.qpos @ data.qpos)) and not np.isfinite(data.qpos).all()):
+        if warnings or (not math.isfinite(float(data.qpos.dot(data.qpos))) and not np.isfinite(data.qpos).all()):
             task.physics_warnings.append({"time": float(data.time), "warnings": warnings or ["NaN"]})
             reward, discount, terminating = 0.0, 0.0, True
         else:
@@ -493,41 +484,6 @@ class OpenDEnvironment(composer.Environment):
             return dm_env.TimeStep(dm_env.StepType.MID, reward, discount, obs)
         self._reset_next_step = True
         return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount, obs)
-
-
-def _slerp_path(q, target, step_angle: float, n: int) -> tuple[np.ndarray, int]:
-    """``n`` quaternions (n, 4) from ``q`` toward ``target``, the k-th at most k * step_angle away,
-    and how many rows differ from the last: the rows from the first that reaches the target on are
-    the same numbers (computed once, repeated).
-
-    Runs on most control steps (the planner turns the hand as a door swings), so it is plain float
-    arithmetic: for 4-vectors that is about twice as fast as numpy.
-    """
-    q0, q1, q2, q3 = (float(x) for x in q)
-    norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-    q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
-    t0, t1, t2, t3 = (float(x) for x in target)
-    norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
-    t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
-    dot = q0 * t0 + q1 * t1 + q2 * t2 + q3 * t3
-    if dot < 0:  # the shorter way round
-        t0, t1, t2, t3, dot = -t0, -t1, -t2, -t3, -dot
-    angle = 2 * math.acos(min(1.0, dot))
-    if angle < 1e-9:
-        return np.tile((t0, t1, t2, t3), (n, 1)), 1
-    half = angle / 2
-    sin_half = math.sin(half)
-    rows = []
-    for k in range(1, n + 1):
-        t = min(k * step_angle / angle, 1.0)
-        a, b = math.sin((1 - t) * half) / sin_half, math.sin(t * half) / sin_half
-        x0, x1, x2, x3 = a * q0 + b * t0, a * q1 + b * t1, a * q2 + b * t2, a * q3 + b * t3
-        norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2 + x3 * x3)
-        rows.append((x0 / norm, x1 / norm, x2 / norm, x3 / norm))
-        if t == 1.0:  # every later k gives t = 1 again: the same inputs, the same row
-            rows.extend([rows[-1]] * (n - k))
-            return np.array(rows), k
-    return np.array(rows), n
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,
