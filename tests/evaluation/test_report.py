@@ -91,3 +91,24 @@ def test_excluded_targets_count_as_failures(tmp_path):
     manifest.write_text("{not json")
     with pytest.raises(ValueError, match="manifest.json"):
         write_summary(RECORDS, tmp_path / "s.json", manifest=manifest)
+
+
+def test_report_reads_every_hands_bc_records(tmp_path):
+    """The behaviour-cloning columns read one records file per hand (results/bc/<hand>_shipped_test.jsonl)
+    and the real aggregates results/real/bc_all.json."""
+    results = tmp_path / "results"
+    (results / "bc").mkdir(parents=True)
+    (results / "real").mkdir()
+    bc = [dict(r, solver="bc-fasterrcnn") for r in RECORDS]
+    shadow = [dict(r, hand="shadow") for r in bc[:2]]
+    for name, records in (("allegro_shipped_test.jsonl", bc), ("shadow_shipped_test.jsonl", shadow),
+                          ("allegro_n50_test.jsonl", bc[:1])):   # not a shipped checkpoint's: not read
+        (results / "bc" / name).write_text("".join(json.dumps(r) + "\n" for r in records))
+    write_summary(bc[1:3], results / "real" / "bc_all.json")
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")]
+            for line in main_table(results).splitlines()[2:]}
+    assert rows["Allegro"][7:9] == ["50.0 / 25.0", "50.0 / 0.0"]
+    assert rows["Shadow"][7:9] == ["100.0 / 50.0", "- / -"]
+    assert rows["Franka gripper"][7] == "- / -"
+    page = write_report(results, tmp_path / "results.md").read_text()
+    assert "## Behaviour cloning" in page and "results/bc/HAND_shipped_test.jsonl" in page

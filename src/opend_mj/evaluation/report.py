@@ -99,9 +99,11 @@ class ResultSet:
 
     solver: str
     title: str
-    generated: str  # results/<name>.jsonl (records)
+    generated: str  # results/<name>.jsonl (records); a glob pattern reads every file it matches
     real: str  # results/real/<name>.json (aggregates)
     command: str
+    #: how the real records were made; default: `make eval-real SOLVER=<solver>`
+    real_command: str = ""
 
 
 RESULT_SETS = (
@@ -111,6 +113,11 @@ RESULT_SETS = (
               "... --solver cliport"),
     ResultSet("fasterrcnn", "Faster R-CNN", "fasterrcnn_test.jsonl", "fasterrcnn_all.json",
               "... --solver fasterrcnn"),
+    # the shipped behaviour-cloning checkpoints (checkpoints/bc_<hand>.pt), one records file per hand
+    ResultSet("bc-fasterrcnn", "Behaviour cloning", "bc/*_shipped_test.jsonl", "bc_all.json",
+              "opend run --policy bc --hand HAND --split test",
+              "opend run --policy bc --hand HAND --split all --cabinets build/opend-train "
+              "--out build/real-results/bc_HAND_real.jsonl` per hand, then `opend score build/real-results/bc_*_real.jsonl"),
 )
 #: Generated-split conditions reported below the main table: (file, what it varies).
 CONDITIONS = (
@@ -130,9 +137,12 @@ def _rate(cell: dict | None, criterion: str) -> str:
 
 
 def _load_generated(path: Path) -> dict:
+    """:func:`summarize` of one records file, or of every file a glob pattern in its name matches."""
     from opend_mj.evaluation.scoring import load_records
 
-    return summarize(load_records([path])) if path.is_file() else {}
+    paths = sorted(path.parent.glob(path.name)) if any(c in path.name for c in "*?[") else [path]
+    paths = [p for p in paths if p.is_file()]
+    return summarize(load_records(paths)) if paths else {}
 
 
 def _load_real(path: Path) -> tuple[dict, dict]:
@@ -202,13 +212,13 @@ def results_markdown(results_dir: Path) -> str:
         out += [f"## {rs.title}", ""]
         out += ["Cells: open ratio > 20 % / > 50 % / joint >= 75 % of its range.", ""]
         if generated:
-            out += [f"Generated test split (`{rs.command} --out results/{rs.generated}`):", ""]
+            out += [f"Generated test split (`{rs.command} --out results/{rs.generated.replace('*', 'HAND')}`):", ""]
             out += _detail_table(generated, rs.solver) + [""]
         if real:
             out += [f"Real cabinets ({meta.get('cabinets')} cabinets, {meta.get('targets')} targets, "
                     f"{meta.get('excluded_targets', 0)} of them excluded by the build's feasibility check and "
                     f"counted as failures; "
-                    f"`make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl "
+                    f"`{rs.real_command or f'make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl'} "
                     f"--summary results/real/{rs.real} --manifest build/opend-train/manifest.json`):", ""]
             out += _detail_table(real, rs.solver) + [""]
     rows = []
