@@ -209,32 +209,34 @@ def _flap_depth(sign: float, radius: float, opening: float) -> np.ndarray:
     return depth.reshape(256, 256)
 
 
+def _pull_loose_flap(sign: float, radius: float, config: PlannerConfig) -> tuple[float, list]:
+    """The Allegro's pull stage on a :class:`LooseFlap` turning up to 95 degrees, the robot able to
+    look again: (the fraction of its travel it opened, the planner's events)."""
+    from opend_mj.policy.perception import HandleEstimate
+
+    part = LooseFlap(sign, radius, math.radians(95.0))
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
+    planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
+                                          size=(0.2, 0.016), front_x=PANEL_X - 0.04, panel_x=PANEL_X)
+    planner.state.first = Observation(rgb=None, depth=part.look(), instruction="door", camera_view=_flap_view())
+    quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
+    g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
+    result = PlanResult(stage_reached="pull", failed_stage=None)
+    planner.pull(part, g, True, PullState(quat0=quat), result)
+    return part.opening / part.travel, result.events
+
+
 @pytest.mark.parametrize("sign, radius", [(1.0, 0.4), (-1.0, 0.6)])
 def test_a_flap_held_without_touch_is_seen_by_the_camera(sign, radius):
     """A hand that feels nothing records no held path; one look, 8 cm into the pull, shows the
     front's shift growing down it (a flap hinged at its top) or up it (at its bottom), and the flap
     is then pulled along its circle to its stop. Without the look it is pulled as a side door is,
     and the bar twists out of the hand before the flap is half open."""
-    from opend_mj.policy.perception import HandleEstimate
-
-    def pull(config):
-        part = LooseFlap(sign, radius, math.radians(95.0))
-        planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
-        planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
-                                              size=(0.2, 0.016), front_x=PANEL_X - 0.04, panel_x=PANEL_X)
-        planner.state.first = Observation(rgb=None, depth=part.look(), instruction="door", camera_view=_flap_view())
-        quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
-        g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
-        state = PullState(quat0=quat)
-        result = PlanResult(stage_reached="pull", failed_stage=None)
-        planner.pull(part, g, True, state, result)
-        return part.opening / part.travel, result.events
-
-    opened, events = pull(PlannerConfig())
+    opened, events = _pull_loose_flap(sign, radius, PlannerConfig())
     seen = [e["flap"] for e in events if "flap" in e]
     assert seen and seen[0]["hinge"] == ("top" if sign > 0 else "bottom"), events
     assert opened >= 0.85, events
-    assert pull(PlannerConfig().override({"door.flap_pull": False}))[0] < 0.5
+    assert _pull_loose_flap(sign, radius, PlannerConfig().override({"door.flap_pull": False}))[0] < 0.5
 
 
 #: procedural flaps (generator 5, seed 0): proc_0067 joint_2 hinged at its top, proc_0120 joint_0 at
@@ -272,20 +274,10 @@ def test_a_tall_flap_is_seen_at_the_second_look():
     """A drop-down front hinged 85 cm below its handle has turned only 5-6 degrees when the hand
     came 8 cm out, too little for the first look; the second, at 16 cm, sees it and the flap is pulled
     along its circle. With one look only it is not seen as a flap."""
-    from opend_mj.policy.perception import HandleEstimate
 
-    def pull(config):
-        part = LooseFlap(-1.0, 0.85, math.radians(95.0))
-        planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), config)
-        planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
-                                              size=(0.2, 0.016), front_x=PANEL_X - 0.04, panel_x=PANEL_X)
-        planner.state.first = Observation(rgb=None, depth=part.look(), instruction="door", camera_view=_flap_view())
-        quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
-        g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
-        result = PlanResult(stage_reached="pull", failed_stage=None)
-        planner.pull(part, g, True, PullState(quat0=quat), result)
-        return [e["flap"] for e in result.events if "flap" in e]
+    def flaps_seen(config):
+        return [e["flap"] for e in _pull_loose_flap(-1.0, 0.85, config)[1] if "flap" in e]
 
-    seen = pull(PlannerConfig())
+    seen = flaps_seen(PlannerConfig())
     assert seen and seen[0]["hinge"] == "bottom" and seen[0]["out"] >= 0.15, seen
-    assert not pull(PlannerConfig().override({"door.flap_look_distances": (0.08,)}))
+    assert not flaps_seen(PlannerConfig().override({"door.flap_look_distances": (0.08,)}))

@@ -70,9 +70,8 @@ class GraspGeometry:
                 orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
         probe = None
         if clear is not None and not clear[0] and orientation == "horizontal":
-            quat, pre = self.clear_pose(handle, shape, level, quat, pos, pre, result)
-            down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and \
-                result.events[-1].get("no_clear_pose") is not None else None
+            quat, pre, cleared = self.clear_pose(handle, shape, level, quat, pos, pre, result)
+            down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and not cleared else None
             if down is not None:
                 (quat, pos, pre), style = down, "hook_down"
                 probe = np.array([-1.0, 0.0, 0.0])  # out of the panel: the hook pulls the bar's back
@@ -146,7 +145,8 @@ class GraspGeometry:
         """A horizontal handle whose pose does not clear the floor and the panel: the first of the
         hand's ``clearance_pitches`` (deg, from the level pose ``level``) at which it does, a
         gripper's fingers opened no wider than they must (down to the bar's half thickness plus
-        ``clearance_bar_margin``); else the pose unchanged (event ``no_clear_pose``)."""
+        ``clearance_bar_margin``); else the pose unchanged (event ``no_clear_pose``). The third value
+        says whether a pitch cleared."""
         hand = self.hand
         gripper = self.spec.hand_type == "parallel_gripper"
         narrowest = shape.thickness / 2 + hand.clearance_bar_margin
@@ -158,9 +158,9 @@ class GraspGeometry:
                 clear = self.clears(handle, shape, q, pos, fingers)
                 if clear[0]:
                     result.events.append({"clearance_pitch": [pitch, *clear[1:]]})
-                    return q, fingers
+                    return q, fingers, True
         result.events.append({"no_clear_pose": list(self.clears(handle, shape, quat, pos, pre)[1:])})
-        return quat, pre
+        return quat, pre, False
 
     def hook_down_pose(self, handle, shape, result: PlanResult):
         """(site orientation, position, finger targets) of a hook from above into the stand-off
@@ -177,6 +177,7 @@ class GraspGeometry:
             return None
         panel_x = float(handle.front_x + shape.protrusion)
         fingers = self.spec.grasp_profile("vertical")
+        outline = outline_for(self.spec, fingers)
         along_bar = orientation_for_handle("vertical")  # the closing axis along world y
         z = handle.centre[2] - hand.hook_down_depth
         best, tried = None, []
@@ -187,10 +188,10 @@ class GraspGeometry:
                 continue
             quat = quat_mul(axis_angle_quat((0.0, 1.0, 0.0), math.radians(pitch)), along_bar)
             x = panel_x - across / 2 - hand.hook_down_margin  # the fingers' back at the margin
-            floor, door = clearances(outline_for(self.spec, fingers), np.array([x, handle.centre[1], z]), quat, panel_x)
+            _, door = clearances(outline, np.array([x, handle.centre[1], z]), quat, panel_x)
             x_bar = panel_x - shape.gap + across / 2 + hand.hook_down_margin  # the fingers against the bar
             x = max(x_bar, x + min(0.0, door))  # the body's clearance to the panel is linear in x
-            floor, door = clearances(outline_for(self.spec, fingers), np.array([x, handle.centre[1], z]), quat, panel_x)
+            floor, door = clearances(outline, np.array([x, handle.centre[1], z]), quat, panel_x)
             tried.append([pitch, round(floor, 4), round(door, 4)])
             if floor < (hand.clearance_margin or 0.0) or door < -1e-6:
                 continue

@@ -89,9 +89,9 @@ class HandPlannerConfig:
     hand points down into the stand-off gap behind the bar, its fingers closed into one hook
     ``hook_down_width`` (m thick across the bar) and lowered ``hook_down_depth`` (m) below the
     bar's centre, and pulls the bar out by the back of its fingers (a gripper's body, 20 cm long
-    across a bar, fits neither under a bar 3-6 cm above the floor nor behind it). The first pitch
+    across a bar, fits neither under a bar 3-6 cm above the floor nor behind it). Of the pitches
     at which the closed fingers fit the gap with ``hook_down_margin`` (m) each side and the hand
-    clears the floor is taken.
+    clears the floor and the panel, the one that puts the fingers farthest behind the bar is taken.
 
     ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle

@@ -112,7 +112,6 @@ class PushRecovery:
         result.events.append({"pushed_to_deg": round(math.degrees(phi), 1)})
         return True
 
-
     def door_seen_turn(self, robot):
         """Look before pushing: how far (rad) the door's front is seen turned across
         (:func:`~opend_mj.policy.perception.front_motion`: the tangent of a side door's angle);
