@@ -18,7 +18,6 @@ ABSOLUTE_ROOT_LOW = (-3.0, -3.0, 0.0)
 ABSOLUTE_ROOT_HIGH = (3.0, 3.0, 3.0)
 
 
-
 class ActionAdapter:
     """Turns a normalised delta action into the task's own action (see the module doc)."""
 
