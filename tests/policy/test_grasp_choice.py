@@ -129,7 +129,7 @@ def test_knob_is_wrapped():
 
 
 def test_parallel_gripper_pinches_every_bar():
-    bar, posts = _bar(thickness=0.008, gap=0.008)
+    bar, posts = _bar(thickness=0.008, gap=0.008, z=0.3)  # well above the floor (low bars: test_hook_from_above)
     _, _, grasp = _choose("franka", [bar, *posts], bar)
     assert grasp.style == "hook"  # the gripper closes across the bar whatever the gap (pinch_gap 0)
 
@@ -200,7 +200,8 @@ def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
     pitch = np.radians(HandPlannerConfig.for_hand(load_spec("franka")).low_handle_pitch)
     assert pitch > 0.0
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
-    _, _, low = _choose("franka", [low_bar, *low_posts], low_bar, "door", kind="door")
+    # (the gripper's own press from above, press_depth, is test_hook_from_above's)
+    _, _, low = _choose("franka", [low_bar, *low_posts], low_bar, "door", kind="door", press_depth=0.0)
     approach = quat_to_mat(low.quat)[:, 2]
     assert approach[2] == pytest.approx(-np.sin(pitch), abs=1e-6) and approach[0] > 0.5
     high_bar, high_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.3)
@@ -252,10 +253,13 @@ def test_the_gripper_has_no_room_at_a_bar_near_the_floor_and_its_door():
 
     bar, posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.04)
     pitches = (35.0, 45.0, 55.0, 65.0, 75.0, 90.0)
-    handle, _, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", clearance_pitches=pitches)
+    handle, _, grasp = _choose("franka", [bar, *posts], bar, "door", kind="door", clearance_pitches=pitches,
+                               press_depth=0.0)
     assert handle.centre[2] < 0.05
-    # nothing clears: the pose stays the hand's low-handle pose (pitched 35 degrees down)
+    # nothing clears: the pose stays the hand's low-handle pose (pitched 35 degrees down); with its
+    # press_depth the gripper presses on the bar's top instead (test_hook_from_above)
     assert quat_to_mat(grasp.quat)[2, 2] == pytest.approx(-np.sin(np.radians(35.0)), abs=1e-6)
+    assert _choose("franka", [bar, *posts], bar, "door", kind="door")[2].style == "press_down"
     planner_events = _choose_events("franka", [bar, *posts], bar, clearance_pitches=pitches)
     assert any("no_clear_pose" in e for e in planner_events), planner_events
     floor, door = next(e["no_clear_pose"] for e in planner_events if "no_clear_pose" in e)

@@ -1,7 +1,8 @@
 """A horizontal bar near the floor hooked from above (``hook_down_pitches``): the Franka gripper's
 body, 20 cm long across a bar, fits neither under a bar 3-6 cm above the floor nor behind it, so it
 points its closed fingers down into the stand-off gap behind the bar and pulls the bar out by their
-backs. Synthetic scenes for the choice; a real PartNet-Mobility door (../shared) end to end."""
+backs; where that gap is too narrow for them, it presses them on the bar's top (``press_depth``).
+Synthetic scenes for the choice; real PartNet-Mobility doors (../shared) end to end."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ import pytest
 SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
 #: a door whose 7 mm bar stands 2-5 cm above the floor with 27 mm behind it (measured in depth)
 LOW_BAR_DOOR = ("45403", "joint_1")
+#: a door whose bar stands 3-5 cm above the floor with too little behind it for the closed fingers
+PRESSED_BAR_DOOR = ("45385", "joint_1")
 
 
 def _helpers():
@@ -42,9 +45,15 @@ def test_the_gripper_hooks_a_low_bar_from_above_where_its_level_grasp_hits_the_f
     assert back < grasp.pos[0] < panel  # in the gap behind the bar
     floor, door = clearances(outline_for(spec, grasp.closed), grasp.pos, grasp.quat, panel)
     assert floor > 0.0 and door >= -1e-6
-    # no gap for the fingers (15 mm): the level grasp stays; 30 cm up: level, fingers open
+    # no gap for the fingers (15 mm): the same pose presses on the bar's top, between the bar's
+    # front and the panel (press_depth), or, for a hand without one, the level grasp stays
     bar, posts = h._bar(thickness=0.008, gap=0.015, length=0.12, z=0.035)
-    assert h._choose("franka", [bar, *posts], bar, "door", kind="door")[2].style != "hook_down"
+    pressed = h._choose("franka", [bar, *posts], bar, "door", kind="door")[2]
+    assert pressed.style == "press_down" and pressed.press > 0.0 and pressed.on_top_press == pressed.press
+    assert bar[0][0] < pressed.pos[0] < panel
+    level = h._choose("franka", [bar, *posts], bar, "door", kind="door", press_depth=0.0)[2]
+    assert level.style not in ("hook_down", "press_down") and level.press == 0.0
+    # 30 cm up: level, fingers open
     bar, posts = h._bar(thickness=0.008, gap=0.032, length=0.12, z=0.3)
     high = h._choose("franka", [bar, *posts], bar, "door", kind="door")[2]
     assert high.style == "hook" and high.probe is None
@@ -65,18 +74,19 @@ def test_hook_down_pitches_are_checked_when_the_hand_file_is_read(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(tmp_path):
+@pytest.mark.parametrize(("target", "style"), [(LOW_BAR_DOOR, "hook_down"), (PRESSED_BAR_DOOR, "press_down")])
+def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(tmp_path, target, style):
     from opend_mj.assets.compiler import compile_cabinet
     from opend_mj.evaluation.episode import EpisodeJob
     from opend_mj.evaluation.runner import run_episode
 
-    cid, joint = LOW_BAR_DOOR
+    cid, joint = target
     if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
         pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
     compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
     rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp_path / "built" / cid), joint=joint,
                                  split="all", hand="franka", solver="oracle"))
     assert "error" not in rec, rec.get("error")
-    assert rec["grasp_style"] == "hook_down"
+    assert rec["grasp_style"] == style
     assert rec["success"] and rec["range_ratio"] > 0.75, rec
     assert rec["others_moved"] == []

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from opend_mj.policy.planner.moves import hold, move
+from opend_mj.policy.planner.moves import hold, move, pressed
 from opend_mj.policy.planner.records import GraspChoice, PlanResult
 from opend_mj.transforms import quat_axis_z
 
@@ -43,8 +43,8 @@ class ApproachAndClose:
         else:
             move(robot, site0, pre_pos, g.quat, g.pre, cfg.move_speed)
         hold(robot, pre_pos, g.quat, g.pre, cfg.pregrasp_wait)
-        move(robot, pre_pos, target, g.quat, g.pre, cfg.approach_speed)
-        hold(robot, target, g.quat, g.pre, cfg.grasp_wait)
+        move(robot, pre_pos, target, g.quat, g.pre, cfg.approach_speed, press=g.on_top_press)
+        hold(robot, target, g.quat, g.pre, cfg.grasp_wait, press=g.on_top_press)
         err = float(np.linalg.norm(robot.site_pos() - target))
         if err > cfg.blocked_error:  # blocked on the way in (the hand's own state says so)
             result.events.append({"approach_error": round(err, 4)})
@@ -61,8 +61,8 @@ class ApproachAndClose:
         close_time = grasp.close_time if grasp.close_time is not None else self.spec.close_time
         n = max(1, int(round(close_time / robot.control_dt)))
         for i in range(1, n + 1):
-            robot.step(target, g.quat, g.pre + (g.closed - g.pre) * i / n)
-        hold(robot, target, g.quat, g.closed, grasp.settle_time)
+            robot.step(pressed(robot, target, g.on_top_press), g.quat, g.pre + (g.closed - g.pre) * i / n)
+        hold(robot, target, g.quat, g.closed, grasp.settle_time, press=g.on_top_press)
         if not cfg.verify_grasp:
             return True
         # pull back up to ``probe_distance``: a bar loose in a curled hand engages within a few cm
@@ -75,7 +75,10 @@ class ApproachAndClose:
         touch: dict = {}
         held = False
         for i in range(1, n + 1):
-            robot.step(start + back * cfg.probe_distance * i / n, g.quat, g.closed)
+            step = start + back * cfg.probe_distance * i / n
+            if g.press:  # a hook from above stays down on the bar (:meth:`Pulling._advance`)
+                step = pressed(robot, np.array([step[0], step[1], -np.inf]), g.press, floor=float(g.pos[2]))
+            robot.step(step, g.quat, g.closed)
             if cfg.probe_distance * i / n >= cfg.probe_min:
                 now, t = self.holding(robot)
                 touch = t if now or not touch else touch

@@ -28,7 +28,9 @@ class _Events:
 
 
 #: the grasp-depth key of each style (``GraspConfig.depth[style]`` wins where it has one)
-STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob", "hook_down": "bar"}
+STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob", "hook_down": "bar", "press_down": "bar"}
+#: styles that come down on a low bar from above (:meth:`GraspGeometry.hook_down_pose`)
+FROM_ABOVE = ("hook_down", "press_down")
 
 
 class GraspGeometry:
@@ -68,12 +70,16 @@ class GraspGeometry:
             if min(rooms[best][1:]) > min(clear[1:]):  # a knob is round: turned a quarter, it holds it as well
                 result.events.append({"knob_turned": [other, *clear[1:], *rooms[best][1:]]})
                 orientation, (quat, pos, pre, level), clear = other, options[best], rooms[best]
-        probe = None
+        probe, press = None, 0.0
         if clear is not None and not clear[0] and orientation == "horizontal":
             quat, pre, cleared = self.clear_pose(handle, shape, level, quat, pos, pre, result)
-            down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and not cleared else None
+            # from above only where the floor is in the way (a bar higher up whose fingers only
+            # touch the panel behind it is grasped level: they stop on the panel)
+            near_floor = clear[1] < self.hand.clearance_margin
+            down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and near_floor and not cleared else None
             if down is not None:
-                (quat, pos, pre), style = down, "hook_down"
+                (quat, pos, pre, on_top), press = down, self.hand.press_depth
+                style = "press_down" if on_top else "hook_down"
                 probe = np.array([-1.0, 0.0, 0.0])  # out of the panel: the hook pulls the bar's back
         if style == "hook" and door and self.hand.hook_slide:
             # a door's bar at the fingers' middle segments, where their curl closes behind it (at the
@@ -92,8 +98,8 @@ class GraspGeometry:
             if slide > 0.0:
                 pos = pos - slide * fingers
                 result.events.append({"hook_slide": round(slide, 4)})
-        closed = pre if style == "hook_down" else self.closed_profile(orientation)
-        grasp = GraspChoice(style, orientation, quat, pos, pre, closed, probe=probe)
+        closed = pre if style in FROM_ABOVE else self.closed_profile(orientation)
+        grasp = GraspChoice(style, orientation, quat, pos, pre, closed, probe=probe, press=press)
         self.state.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
@@ -163,7 +169,7 @@ class GraspGeometry:
         return quat, pre, False
 
     def hook_down_pose(self, handle, shape, result: PlanResult):
-        """(site orientation, position, finger targets) of a hook from above into the stand-off
+        """(site orientation, position, finger targets, on the bar's top) of a hook from above into the stand-off
         gap behind a horizontal bar (``hook_down_pitches`` in the hand's ``planner.json``): the
         fingers closed (one hook, the closing axis along the bar) and pointing down, the site
         ``hook_down_depth`` below the bar's centre. A bar seen from the front may be deeper than
@@ -171,7 +177,11 @@ class GraspGeometry:
         as the hand allows: ``hook_down_margin`` in front of it, the hand's body (above the bar)
         not into it, ``clearance_margin`` above the floor; of the pitches at which the closed
         fingers fit the measured gap, the one that puts their front farthest behind the bar's
-        front. None where none fits (event ``hook_down``)."""
+        front. None where none fits (event ``hook_down``).
+
+        Where the gap takes no fingers and the hand has a ``press_depth``, the same pose comes down
+        on the bar's top instead ("press_down": the closed fingers pressed on it; checked against the floor and the panel where the hand's
+        lowest point meets the bar's top; the last value returned says so)."""
         hand = self.hand
         if not hand.hook_down_pitches or hand.hook_down_width <= 0.0:
             return None
@@ -180,29 +190,37 @@ class GraspGeometry:
         outline = outline_for(self.spec, fingers)
         along_bar = orientation_for_handle("vertical")  # the closing axis along world y
         z = handle.centre[2] - hand.hook_down_depth
+        bar_top = float(handle.centre[2] + shape.thickness / 2)
         best, tried = None, []
         for pitch in hand.hook_down_pitches:
             across = hand.hook_down_width / max(1e-6, math.sin(math.radians(pitch)))  # at one height (m)
-            if shape.gap < across + 2 * hand.hook_down_margin:
+            press = shape.gap < across + 2 * hand.hook_down_margin
+            if press and hand.press_depth <= 0.0:
                 tried.append([pitch, "gap"])
                 continue
             quat = quat_mul(axis_angle_quat((0.0, 1.0, 0.0), math.radians(pitch)), along_bar)
             x = panel_x - across / 2 - hand.hook_down_margin  # the fingers' back at the margin
             _, door = clearances(outline, np.array([x, handle.centre[1], z]), quat, panel_x)
             x_bar = panel_x - shape.gap + across / 2 + hand.hook_down_margin  # the fingers against the bar
-            x = max(x_bar, x + min(0.0, door))  # the body's clearance to the panel is linear in x
+            x = x + min(0.0, door) if press else max(x_bar, x + min(0.0, door))  # linear in x
             floor, door = clearances(outline, np.array([x, handle.centre[1], z]), quat, panel_x)
-            tried.append([pitch, round(floor, 4), round(door, 4)])
+            if press:  # the hand stops where its lowest point meets the bar's top: checked there
+                floor, door = clearances(outline, np.array([x, handle.centre[1], z + bar_top - floor]), quat, panel_x)
+            tried.append([pitch, round(floor, 4), round(door, 4)] + (["press"] if press else []))
             if floor < (hand.clearance_margin or 0.0) or door < -1e-6:
                 continue
             behind = x - across / 2  # the fingers' front, world x
-            if best is None or behind > best[0] + 1e-6:
-                best = (behind, pitch, quat, np.array([x, handle.centre[1], z]))
+            # a hook behind the bar first; else the press whose fingers reach farthest back
+            key = (not press, behind)
+            if best is None or key[0] > best[0][0] or (key[0] == best[0][0] and behind > best[0][1] + 1e-6):
+                best = (key, pitch, quat, np.array([x, handle.centre[1], z]))
         if best is None:
             result.events.append({"hook_down": None, "tried": tried})
             return None
-        result.events.append({"hook_down": [best[1], round(best[0] - (panel_x - shape.gap), 4)], "tried": tried})
-        return best[2], best[3], fingers
+        on_top = not best[0][0]
+        result.events.append({"hook_down": [best[1], round(best[0][1] - (panel_x - shape.gap), 4)],
+                              "on_top": on_top, "tried": tried})
+        return best[2], best[3], fingers, on_top
 
     def _low_handle(self, handle, orientation: str, quat, pos, result: PlanResult):
         """The hand's own way with a handle near the floor (``hands/<name>/planner.json``): pitch the
@@ -278,9 +296,17 @@ class GraspGeometry:
         else at the handle again, nearer then farther than the first try."""
         cfg = self.config.recovery
         deeper = cfg.regrasp_deeper * (g.attempt + 1)
-        if g.style == "hook_down":  # the hook again where it was planned (deeper is the floor)
-            new = GraspChoice(g.style, g.orientation, g.quat, self.state.first_pos.copy(), g.pre, g.closed,
-                              g.attempt + 1, probe=g.probe)
+        if g.style in FROM_ABOVE:  # from above again at the planned height (deeper is the floor): where
+            # the bar was last held (a part that came out part way); a hook that never held found no
+            # gap behind the bar (a solid profile seen as a bar): the fingers press on its top instead
+            pos = self.state.first_pos.copy()
+            style = g.style
+            if state.last_held is not None:
+                pos[:2] = np.asarray(state.last_held[0], float)[:2]
+            elif g.press:
+                style = "press_down"
+            new = GraspChoice(style, g.orientation, g.quat, pos, g.pre, g.closed,
+                              g.attempt + 1, probe=g.probe, press=g.press)
         elif state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
             pos, quat = state.last_held
             quat = np.asarray(quat, float)

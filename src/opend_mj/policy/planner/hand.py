@@ -92,6 +92,10 @@ class HandPlannerConfig:
     across a bar, fits neither under a bar 3-6 cm above the floor nor behind it). Of the pitches
     at which the closed fingers fit the gap with ``hook_down_margin`` (m) each side and the hand
     clears the floor and the panel, the one that puts the fingers farthest behind the bar is taken.
+    ``press_depth`` (m; 0: never): where the gap behind such a bar is too narrow for the closed
+    fingers, the same pose comes down on the bar's top instead and presses this far below it
+    (the grasp style "press_down"): the friction of that press, not a hook, pulls the bar out.
+    Hooks are preferred over presses.
 
     ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
@@ -114,6 +118,7 @@ class HandPlannerConfig:
     hook_down_width: float = 0.0
     hook_down_depth: float = 0.005
     hook_down_margin: float = 0.001
+    press_depth: float = 0.0
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
@@ -143,7 +148,7 @@ class HandPlannerConfig:
                 raise ValueError(f"{path}: unknown field {key!r} (known: {', '.join(fields)})")
             if key == "clearance_knob_turn":
                 if not isinstance(value, bool):
-                    raise ValueError(f"{path}: 'clearance_knob_turn' must be true or false, got {value!r}")
+                    raise ValueError(f"{path}: {key!r} must be true or false, got {value!r}")
                 values[key] = value
                 continue
             if key in ("clearance_pitches", "hook_down_pitches"):

@@ -7,17 +7,34 @@ import math
 import numpy as np
 
 
-def move(robot, start, goal, quat, fingers, speed: float) -> None:
+def pressed(robot, target, press: float, floor: float | None = None) -> np.ndarray:
+    """``target`` no more than ``press`` (m) below the grasp site, nor below ``floor`` (m, world z):
+    fingers that rest on a handle press on it with a bounded force (the mocap weld's spring over
+    ``press``), not with the whole of a target far below them. ``press`` 0: ``target``."""
+    if not press:
+        return target
+    z = max(float(target[2]), float(robot.site_pos()[2]) - press)
+    if floor is not None:
+        z = max(z, floor)
+    if z == float(target[2]):
+        return target
+    out = np.array(target, float)
+    out[2] = z
+    return out
+
+
+def move(robot, start, goal, quat, fingers, speed: float, press: float = 0.0) -> None:
     """Move the grasp-site target in a straight line from ``start`` to ``goal`` (m) at ``speed``
-    (m/s; the task's mocap speed limit also applies), the site orientation and fingers held."""
+    (m/s; the task's mocap speed limit also applies), the site orientation and fingers held;
+    ``press``: see :func:`pressed`."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     dist = float(np.linalg.norm(goal - start))
     n = max(1, int(math.ceil(dist / (speed * robot.control_dt))))
     for i in range(1, n + 1):
-        robot.step(start + (goal - start) * i / n, quat, fingers)
+        robot.step(pressed(robot, start + (goal - start) * i / n, press), quat, fingers)
 
 
-def hold(robot, pos, quat, fingers, seconds: float) -> None:
-    """Keep the grasp-site target and finger targets for ``seconds`` (s)."""
+def hold(robot, pos, quat, fingers, seconds: float, press: float = 0.0) -> None:
+    """Keep the grasp-site target and finger targets for ``seconds`` (s); ``press``: see :func:`pressed`."""
     for _ in range(max(0, int(round(seconds / robot.control_dt)))):
-        robot.step(pos, quat, fingers)
+        robot.step(pressed(robot, pos, press), quat, fingers)

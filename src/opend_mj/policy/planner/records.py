@@ -54,7 +54,8 @@ class GraspChoice:
     """One grasp: the style chosen from the handle's shape, the site pose and the finger targets."""
 
     style: str  # "hook" (behind a bar with room), "pinch" (a bar close to its panel), "wrap" (a knob),
-    # "hook_down" (a low bar hooked from above by the closed fingers)
+    # "hook_down" (a low bar hooked from above by the closed fingers), "press_down" (the closed
+    # fingers pressed on a low bar's top, dragging it by friction: no gap behind it takes them)
     orientation: str  # the handle's: "horizontal" | "vertical"
     quat: np.ndarray  # grasp-site orientation (world)
     pos: np.ndarray  # grasp-site position (world, m)
@@ -64,6 +65,15 @@ class GraspChoice:
     #: the direction (world unit vector) the grasp is tested by pulling along; None: back along
     #: the approach axis (a hand that hooks from above tests by pulling out of the panel instead)
     probe: np.ndarray | None = None
+    #: m: a hook that does not fit behind the bar presses on its top instead; verify and pull keep
+    #: the site's target this far below the site, so the fingers drag the bar by friction
+    press: float = 0.0
+
+    @property
+    def on_top_press(self) -> float:
+        """``press`` (m) for fingers that come down on the bar's top ("press_down": approach and
+        close bounded too); 0 for the others, which go where they were planned."""
+        return self.press if self.style == "press_down" else 0.0
 
     @property
     def axis(self) -> np.ndarray:
@@ -71,8 +81,11 @@ class GraspChoice:
         return quat_axis_z(self.quat)
 
     def to_dict(self) -> dict:
-        return {"style": self.style, "orientation": self.orientation, "attempt": self.attempt,
-                "pos": [round(float(x), 4) for x in self.pos]}
+        out = {"style": self.style, "orientation": self.orientation, "attempt": self.attempt,
+               "pos": [round(float(x), 4) for x in self.pos]}
+        if self.press:
+            out["press"] = self.press
+        return out
 
 
 @dataclass
