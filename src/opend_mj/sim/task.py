@@ -254,6 +254,7 @@ class OpenCabinetTask(composer.Task):
                 raise ValueError("action quaternion has zero norm")
             target = fast.root_target.tolist()
             self._root_target = (tuple(target[:3]), np.array(target[3:]))
+            self._substep = 0
             self._fast_planned = True
             return
         self.apply_action(action[:3].tolist(), action[3:7], action[7:])

@@ -264,6 +264,7 @@ int64_t ofs_apply(ofs_ctx *c) {
 
 /* the planned path's row i into the mocap (composer's per-substep hook, `before_substep`) */
 void ofs_write_row(ofs_ctx *c, int64_t i) {
+  if (i < 0 || i >= c->substeps) return;  /* no row: composer stepping more substeps than planned */
   if (c->has_pos) memcpy(c->d->mocap_pos + 3 * c->mocap_id, c->path_pos + 3 * i, 3 * sizeof(double));
   if (c->has_quat) memcpy(c->d->mocap_quat + 4 * c->mocap_id, c->path_quat + 4 * i, 4 * sizeof(double));
 }
