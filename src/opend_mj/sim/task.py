@@ -376,7 +376,7 @@ class OpenCabinetTask(composer.Task):
 
             lib = library()
             if lib is not None and TaskStep.supports(self):
-                self._fast = TaskStep(lib, self, physics, ddot_pointer())
+                self._fast = TaskStep(lib, self, physics, ddot_pointer(), _warning_ids)
 
     def mocap_path(self) -> tuple[np.ndarray | None, np.ndarray | None, int]:
         """The mocap's path of the current control step: (position rows (n, 3) or None where the

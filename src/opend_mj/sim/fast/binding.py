@@ -66,9 +66,10 @@ class TaskStep:
     `apply` reads; ``action`` the environment's delta action buffer.
     """
 
-    def __init__(self, lib, task, physics, ddot: tuple[int, int]):
-        from opend_mj.sim.task import _warning_ids
-
+    def __init__(self, lib, task, physics, ddot: tuple[int, int], warning_ids):
+        """``ddot``: (address or 0, 1 for 64-bit integers) of the dot product (`fast.ddot_pointer`);
+        ``warning_ids``: the mjtWarning numbers of the instability warnings, in the order of the
+        status bits."""
         self.lib = lib
         self._model, self._data = physics.model.ptr, physics.data.ptr  # kept alive with the context
         ctx = self.ctx = Ctx()
@@ -83,7 +84,7 @@ class TaskStep:
                       _array(task._planner._turn, np.float64)]
         (ctx.ctrl_index, ctx.ctrl_lo, ctx.ctrl_hi, ctx.workspace, ctx.travel,
          ctx.turn) = (a.ctypes.data for a in self._keep)
-        ctx.warn_ids[:] = _warning_ids
+        ctx.warn_ids[:] = [int(w) for w in warning_ids]
         ctx.time_limit = task.config.time_limit
         self.native = np.zeros(7 + n)
         self.action = np.zeros(6 + n)

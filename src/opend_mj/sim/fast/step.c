@@ -25,7 +25,6 @@
 #include <mujoco/mujoco.h>
 
 #define OFS_MAX_SUBSTEPS 64
-#define OFS_MAX_TARGETS 64
 #define OFS_MAX_HANDLE_BODIES 8
 
 /* status bits returned by ofs_env_step / ofs_fill / ofs_apply / ofs_substeps */
