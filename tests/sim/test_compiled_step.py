@@ -237,3 +237,23 @@ def test_the_c_source_ships_with_the_package():
 
     assert resources.files("opend_mj.sim.fast").joinpath("step.c").is_file()
     assert fast.SOURCE.read_text().count("ofs_env_step") >= 1
+
+
+def test_compiled_step_reports_instabilities_as_the_python_step_does(small_dataset):
+    """A state that blows up: the same warnings, termination, zero reward and observations."""
+    _require_compiled()
+    kwargs = dict(cabinets=str(small_dataset), split="all", hand="allegro")
+    compiled = gym.make(ENV_ID, **kwargs).unwrapped
+    python = gym.make(ENV_ID, compiled_step=False, **kwargs).unwrapped
+    try:
+        for env in (compiled, python):
+            env.reset(seed=2)
+            env.core.scene._data.qvel[:] = 1e12  # far beyond anything MuJoCo accepts
+        action = np.zeros(compiled.action_space.shape)
+        out, ref = compiled.step(action), python.step(action)
+        _same_obs(out[0], ref[0], "unstable step")
+        assert out[1:4] == ref[1:4] and out[2] and out[1] == 0.0
+        assert out[4]["physics_warnings"] and json.dumps(out[4], sort_keys=True) == json.dumps(ref[4], sort_keys=True)
+    finally:
+        compiled.close()
+        python.close()

@@ -51,7 +51,7 @@ from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, 
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
 from opend_mj.sim.actions import ABSOLUTE_ROOT_HIGH, ABSOLUTE_ROOT_LOW, ActionAdapter  # noqa: E402,F401
 from opend_mj.sim.scene_reader import PROPRIO_KEYS, SceneReader  # noqa: E402,F401  (SceneReader: re-exported)
-from opend_mj.sim.task import _WARNING_NAMES, EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
+from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig, warning_names  # noqa: E402
 from opend_mj.transforms import turn_about_z  # noqa: E402
 
 OBS_MODES = ("state", "rgb", "depth", "rgbd")
@@ -376,8 +376,7 @@ class OpenDCore:
         status = fast.step(action) if fast is not None else None
         if status is not None:  # the compiled step ran (and filled the vector and the terms)
             if status & (WARNING_BITS | NAN):
-                bits = status & WARNING_BITS
-                warnings = [name for k, name in enumerate(_WARNING_NAMES) if bits >> k & 1] if bits else ["NaN"]
+                warnings = warning_names(status & WARNING_BITS) or ["NaN"]
                 task.physics_warnings.append({"time": float(scene._data.time), "warnings": warnings})
             last = bool(status & LAST)
             terms = fast.terms(status)

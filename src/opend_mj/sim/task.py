@@ -310,8 +310,7 @@ class OpenCabinetTask(composer.Task):
         raised in this control step.
         """
         if self._fast_planned:  # planned by the compiled step: its substeps
-            bits = self._fast.substeps(cameras)
-            return [name for k, name in enumerate(_WARNING_NAMES) if bits >> k & 1] if bits else []
+            return warning_names(self._fast.substeps(cameras))
         model, data = self._model, self._data  # physics's, cached at the episode's start
         counts = self._warning_counts  # live view of the instability warnings' counters
         before = counts.tolist()
@@ -452,6 +451,12 @@ _warning_ids = [int(w) for w in _INSTABILITY_WARNINGS]
 #: and each instability warning's position in it (`_INSTABILITY_WARNINGS` order)
 _WARNING_SLICE = slice(min(_warning_ids), max(_warning_ids) + 1)
 _WARNING_POSITIONS = [(name, i - min(_warning_ids)) for name, i in zip(_WARNING_NAMES, _warning_ids)]
+
+
+def warning_names(bits: int) -> list[str]:
+    """The instability warnings whose bits are set (bit k: the k-th of `_INSTABILITY_WARNINGS`; the
+    compiled step's status bits)."""
+    return [name for k, name in enumerate(_WARNING_NAMES) if bits >> k & 1] if bits else []
 
 
 class OpenDEnvironment(composer.Environment):
