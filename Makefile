@@ -129,7 +129,7 @@ bench-task: install
 	$(BIN)/python tools/bench_task.py
 
 ## Environment steps/s against MuJoCo's own rate, in interleaved chunks, wall and CPU time, load average printed:
-## raw mj_step ceiling, state steps/s and their ratio, the shared-memory vector env (1 and 2 workers,
+## raw mj_step ceiling, state steps/s (the compiled and the Python step) and their ratio, the shared-memory vector env (1 and 2 workers,
 ## step_in_main), two free-running processes as the reference, RGB-D at 128 and 256 against the renderer
 ## (also in `make bench`).
 bench-env: install

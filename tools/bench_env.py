@@ -1,7 +1,7 @@
 """Environment steps per second against what MuJoCo itself allows, in one run (`make bench-env`).
 
     python tools/bench_env.py [--cabinets cabinets] [--hand allegro] [--steps 1500] [--chunk 50]
-                              [--image-steps 300] [--sizes 128,256]
+                              [--image-steps 300] [--sizes 128,256] [--state-only]
 
 Made for a shared machine: every figure that is compared with another is measured in interleaved
 chunks of ``--chunk`` steps in one run (a chunk of each contestant in turn, round after round), so
@@ -16,7 +16,9 @@ the run, so that no reset falls inside a timed chunk):
   as it is at that chunk (the same model and scene, hand where the environment left it, controls
   held); / substeps per control step = the ceiling in control steps/s.
 - state: ``env.step`` of ``gym.make(...)`` (with gymnasium's order-enforcing and passive-checker
-  wrappers) and of ``env.unwrapped``, in one process; their ratio to the ceiling.
+  wrappers) and of ``env.unwrapped``, in one process; their ratio to the ceiling. The default step
+  is the compiled one (`opend_mj.sim.fast`) where it loads; the Python step (``compiled_step=False``,
+  the same numbers) is timed beside it, in the same interleaved chunks.
 - vector: `OpenDVectorEnv` (``gym.make_vec``'s default for these ids: shared memory) with 1 and 2
   worker processes, with 2 environments in 2 processes (``step_in_main=True``: environment 0 in the
   main process, 1 worker), and gymnasium's ``AsyncVectorEnv`` with 2 (pickled dict observations
@@ -227,29 +229,36 @@ class FreePair:
             proc.join(timeout=10)
 
 
-def state_and_vector(base: dict, steps: int, k: int) -> dict:
-    """Interleaved chunks: gym.make env, the unwrapped env, raw mj_step, vector envs (1, 2, async 2)."""
+def state_and_vector(base: dict, steps: int, k: int, vector: bool = True) -> dict:
+    """Interleaved chunks: gym.make env (compiled and Python step), the unwrapped env, raw mj_step,
+    vector envs (1, 2, async 2)."""
     single = Single(base, 2 * steps + 2 * k)
-    vectors = {"vec1": Vector(base, steps + k, 1), "vec2": Vector(base, steps + k, 2)}
-    try:
-        vectors["main2"] = Vector(base, steps + k, 2, step_in_main=True)
-    except TypeError:  # an OpenDVectorEnv without step_in_main (comparing against older code)
-        pass
-    vectors["async2"] = Vector(base, steps + k, 2, mode="async")
-    vectors["free2"] = FreePair(base, steps + k)
-    tallies = {key: Tally() for key in ("env", "unwrapped", "raw", *vectors)}
+    python = Single({**base, "compiled_step": False}, steps + k)  # the same episode and actions
+    vectors = {}
+    if vector:
+        vectors = {"vec1": Vector(base, steps + k, 1), "vec2": Vector(base, steps + k, 2)}
+        try:
+            vectors["main2"] = Vector(base, steps + k, 2, step_in_main=True)
+        except TypeError:  # an OpenDVectorEnv without step_in_main (comparing against older code)
+            pass
+        vectors["async2"] = Vector(base, steps + k, 2, mode="async")
+        vectors["free2"] = FreePair(base, steps + k)
+    tallies = {key: Tally() for key in ("env", "python", "unwrapped", "raw", *vectors)}
     try:
         single.chunk(single.env, k, Tally())  # warm-up
+        python.chunk(python.env, k, Tally())
         for v in vectors.values():
             v.chunk(k, Tally())
         for _ in range(steps // k):
             single.chunk(single.env, k, tallies["env"])
             single.raw_chunk(k, tallies["raw"])
+            python.chunk(python.env, k, tallies["python"])
             single.chunk(single.env.unwrapped, k, tallies["unwrapped"])
             for key, v in vectors.items():
                 v.chunk(k, tallies[key])
     finally:
         single.close()
+        python.close()
         for v in vectors.values():
             v.close()
     return {"tallies": tallies, "substeps": single.substeps, "ended": single.ended}
@@ -282,7 +291,11 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=50, help="steps per chunk (contestants take turns)")
     parser.add_argument("--image-steps", type=int, default=300, help="RGB-D steps per image size")
     parser.add_argument("--sizes", default="128,256", help="RGB-D image sizes (square), comma-separated")
+    parser.add_argument("--state-only", action="store_true", help="only the single-process state figures")
     args = parser.parse_args()
+    from opend_mj.sim import fast
+
+    step_kind = fast.status()
     # a time limit beyond the run: no reset inside a timed chunk (60 control steps per second)
     limit = (2 * args.steps + 4 * args.chunk) / 60.0 + 10.0
     base = {"cabinets": args.cabinets, "hand": args.hand, "split": args.split, "time_limit": limit}
@@ -290,14 +303,18 @@ def main() -> None:
     cpus = os.cpu_count()
     print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {cpus} CPUs", flush=True)
 
-    s = state_and_vector(base, args.steps, args.chunk)
+    print(f"the environments' step: {step_kind}", flush=True)
+    s = state_and_vector(base, args.steps, args.chunk, vector=not args.state_only)
     t, sub = s["tallies"], s["substeps"]
-    raw, env, unwrapped = t["raw"], t["env"], t["unwrapped"]
+    raw, env, unwrapped, python = t["raw"], t["env"], t["unwrapped"], t["python"]
     ceiling, cpu_ceiling = raw.rate, raw.cpu_rate  # control steps (of `sub` mj_steps) per second
-    print(f"raw mj_step {raw.rate * sub:.0f}/s -> ceiling {ceiling:.0f} control steps/s; state env {env.rate:.0f} "
-          f"steps/s ({env.rate / ceiling:.2f} of the ceiling; CPU time {env.cpu_rate / cpu_ceiling:.2f})", flush=True)
+    us = 1e6
+    for label, tally in (("state env", env), ("Python step", python)):
+        print(f"{label}: {tally.rate:.0f} steps/s ({tally.rate / ceiling:.2f} of the ceiling {ceiling:.0f}; CPU time "
+              f"{tally.cpu_rate / cpu_ceiling:.2f}, {(1 / tally.cpu_rate - 1 / cpu_ceiling) * us:.0f} us around "
+              f"{us / cpu_ceiling:.0f} us of physics)", flush=True)
     images = []
-    for size in (int(x) for x in args.sizes.split(",")):
+    for size in (int(x) for x in args.sizes.split(",")) if not args.state_only else ():
         f = image_figures(base, args.image_steps, args.chunk, size)
         physics = f["raw"].rate
         both = 1.0 / (1.0 / physics + 1.0 / f["render"].rate)
@@ -306,7 +323,6 @@ def main() -> None:
               f"physics + rendering ceiling {both:.0f}", flush=True)
     load_after = os.getloadavg()
 
-    us = 1e6
     print(f"\n## Environment benchmark (`{ENV_ID}`, {args.hand}, {args.split} split, random delta actions, "
           f"60 Hz control, {sub} physics substeps)\n")
     print(f"(Load average {load[0]:.1f} when the run started and {load_after[0]:.1f} when it ended, on {cpus} CPUs: "
@@ -317,7 +333,7 @@ def main() -> None:
     print(_row(f"raw `mj_step`/s on the env's own model and state (CPU time: {raw.cpu_rate * sub:.0f})",
                f"{raw.rate * sub:.0f}"))
     print(_row(f"ceiling: control steps/s (raw / {sub}; CPU time: {cpu_ceiling:.0f})", f"{ceiling:.0f}"))
-    print(_row("**state steps/s, 1 process** (`gym.make`)", f"**{env.rate:.0f}**",
+    print(_row(f"**state steps/s, 1 process** (`gym.make`; {step_kind})", f"**{env.rate:.0f}**",
                f"**{env.rate / ceiling:.2f} of the ceiling**"))
     print(_row("the same in CPU time of the process (steps per CPU second)", f"{env.cpu_rate:.0f}",
                f"{env.cpu_rate / cpu_ceiling:.2f} of the ceiling"))
@@ -326,7 +342,14 @@ def main() -> None:
                f"{unwrapped.rate / ceiling:.2f} ({unwrapped.cpu_rate / cpu_ceiling:.2f}) of the ceiling"))
     print(_row("Python around the physics per step (CPU time)", f"{(1 / env.cpu_rate - 1 / cpu_ceiling) * us:.0f} us",
                f"physics {us / cpu_ceiling:.0f} us"))
+    print(_row("state steps/s, 1 process, the Python step (`compiled_step=False`; CPU time)",
+               f"{python.rate:.0f} ({python.cpu_rate:.0f})",
+               f"{python.rate / ceiling:.2f} ({python.cpu_rate / cpu_ceiling:.2f}) of the ceiling"))
+    print(_row("&nbsp;&nbsp;its Python around the physics per step (CPU time)",
+               f"{(1 / python.cpu_rate - 1 / cpu_ceiling) * us:.0f} us", f"physics {us / cpu_ceiling:.0f} us"))
     one_cpu = 1.0 / env.cpu_rate  # CPU seconds per step in one process
+    if args.state_only:
+        return
     free = t["free2"]
     print(_row("reference: 2 independent processes, an environment each, stepping at the same time "
                "(no hand-over; CPU per step)", f"{free.rate:.0f} ({free.worker_cpu / free.steps * us:.0f} us)",

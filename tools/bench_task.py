@@ -53,7 +53,7 @@ class _Recorder:
         self.actions.append(np.array(action))
         ts = self._step(action)
         self.ctrls.append(self.env.physics.data.ctrl.copy())
-        self.paths.append((self.task._path_pos, self.task._path_quat))
+        self.paths.append(self.task.mocap_path()[:2])
         return ts
 
     def substep_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

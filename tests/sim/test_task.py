@@ -282,17 +282,21 @@ def test_slerp_path_repeats_the_arrival_row_and_says_where_it_arrives():
     assert arrived_early > 50
 
 
-def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep(door_case):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep(door_case, compiled):
     """`fast_substeps` runs the substeps after the mocap reaches its target pose as one mj_step(n)
-    call: the same state, to the bit, as writing every row of the path and stepping once each."""
+    call: the same state, to the bit, as writing every row of the path and stepping once each (the
+    Python step's and the compiled step's)."""
     import mujoco
 
     cabinet, target = door_case
     env = make_environment(EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0),
-                           TaskConfig(enable_rgbd=False), observations=False)
+                           TaskConfig(enable_rgbd=False, compiled_step=compiled), observations=False)
     try:
         env.reset()
         task, physics = env.task, env.physics
+        if compiled and task._fast is None:
+            pytest.skip("the compiled step is not available here (no C compiler, or OPEND_FASTSTEP=0)")
         model, data = physics.model.ptr, physics.data.ptr
         quat = task.start_pose[1]
         mid = task._mocap_id
@@ -310,15 +314,16 @@ def test_substeps_after_the_mocap_arrives_in_one_call_match_one_call_per_substep
                                       task.hand.spec.open_pose)
             task.before_step(physics, action, None)
             mujoco.mj_copyData(copy, model, data)
+            path_pos, path_quat, writes = task.mocap_path()
             for i in range(task._substeps):  # the reference: every row written, one mj_step each
-                if task._path_pos is not None:
-                    copy.mocap_pos[task._mocap_id] = task._path_pos[i]
-                if task._path_quat is not None:
-                    copy.mocap_quat[task._mocap_id] = task._path_quat[i]
+                if path_pos is not None:
+                    copy.mocap_pos[task._mocap_id] = path_pos[i]
+                if path_quat is not None:
+                    copy.mocap_quat[task._mocap_id] = path_quat[i]
                 mujoco.mj_step(model, copy)
             mujoco.mj_kinematics(model, copy)
-            merged += task._path_writes < task._substeps
-            kinds.add((task._path_pos is None, task._path_quat is None))
+            merged += writes < task._substeps
+            kinds.add((path_pos is None, path_quat is None))
             task.fast_substeps(physics, cameras=False)
             for field in ("qpos", "qvel", "act", "mocap_pos", "mocap_quat", "xpos", "qacc_warmstart"):
                 assert getattr(data, field).tobytes() == getattr(copy, field).tobytes(), (k, field)

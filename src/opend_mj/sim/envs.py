@@ -45,12 +45,13 @@ from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
 from opend_mj.language import describe_instruction  # noqa: E402
+from opend_mj.sim.fast.binding import LAST, NAN, WARNING_BITS  # noqa: E402
 from opend_mj.sim.hands import touch_parts  # noqa: E402
 from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, sparse_reward  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
 from opend_mj.sim.actions import ABSOLUTE_ROOT_HIGH, ABSOLUTE_ROOT_LOW, ActionAdapter  # noqa: E402,F401
 from opend_mj.sim.scene_reader import PROPRIO_KEYS, SceneReader  # noqa: E402,F401  (SceneReader: re-exported)
-from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig  # noqa: E402
+from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig, warning_names  # noqa: E402
 from opend_mj.transforms import turn_about_z  # noqa: E402
 
 OBS_MODES = ("state", "rgb", "depth", "rgbd")
@@ -111,6 +112,9 @@ class EnvConfig:
     #: False: step through composer and read observations the straightforward way (the reference
     #: the default lean step is tested against, bit for bit; several times slower)
     lean_step: bool = True
+    #: with the lean step: the whole control step in one compiled call where `opend_mj.sim.fast`
+    #: loads (the same numbers as the lean Python step, which runs with False)
+    compiled_step: bool = True
     dense: DenseRewardConfig = field(default_factory=DenseRewardConfig)
 
     def __post_init__(self):
@@ -128,7 +132,8 @@ class EnvConfig:
 
     def task_config(self) -> TaskConfig:
         config = TaskConfig(enable_rgbd=False, image_size=self.image_size, time_limit=self.time_limit,
-                            success_threshold=self.success_threshold)
+                            success_threshold=self.success_threshold,
+                            compiled_step=self.compiled_step and self.lean_step)
         if self.physics_timestep is not None:
             config = replace(config, physics_timestep=float(self.physics_timestep))
         return config
@@ -265,6 +270,8 @@ class OpenDCore:
         self._depth = config.obs_mode in ("depth", "rgbd")
         self._rgbd = config.obs_mode != "state"  # the step brings cameras up to date for rendering
         self._delta = config.control == "delta"
+        #: the compiled step of the current episode (`sim.fast.binding.EnvStep`), or None
+        self._fast = None
 
     def set_observation_order(self, keys) -> None:
         """The key order of the observation dicts `observe` returns (e.g. the gymnasium space's).
@@ -327,6 +334,12 @@ class OpenDCore:
         task.start_offset, task.start_yaw = episode.start_offset, episode.start_yaw
         scene.env.reset()
         scene.probe.start()
+        self._fast = None
+        if task._fast is not None:
+            from opend_mj.sim.fast.binding import EnvStep
+            if EnvStep.supports(scene):
+                self._fast = EnvStep(task._fast, scene, self._flat, self.adapter, self._delta, self._rgbd,
+                                     self.config.privileged)
         self.scene, self.episode = scene, episode
         self._needs_reset = False
         self.steps = 0
@@ -359,7 +372,15 @@ class OpenDCore:
         scene = self.scene
         task = scene.task
         c = self.config
-        if c.lean_step:
+        fast = self._fast
+        status = fast.step(action) if fast is not None else None
+        if status is not None:  # the compiled step ran (and filled the vector and the terms)
+            if status & (WARNING_BITS | NAN):
+                warnings = warning_names(status & WARNING_BITS) or ["NaN"]
+                task.physics_warnings.append({"time": float(scene._data.time), "warnings": warnings})
+            last = bool(status & LAST)
+            terms = fast.terms(status)
+        elif c.lean_step:
             if self._delta:  # the task's action in parts (`delta_parts` checks it as before_step does)
                 task.apply_action(*self.adapter.delta_parts(action, *task.mocap_views))
             else:

@@ -52,6 +52,9 @@ class TaskConfig:
     #: Workspace box for root targets (world, metres) relative to the cabinet bounds.
     workspace_margin: float = 1.5
     enable_rgbd: bool = True
+    #: True: the control step runs in compiled code (`opend_mj.sim.fast`) where it loads; the same
+    #: numbers as the Python step, which runs otherwise (False, ``OPEND_FASTSTEP=0``, no compiler)
+    compiled_step: bool = True
 
     def __post_init__(self):
         if not (self.control_hz > 0 and self.physics_timestep > 0):
@@ -148,6 +151,10 @@ class OpenCabinetTask(composer.Task):
         #: Substeps of this control step whose mocap write changes the mocap pose: from there on the
         #: path's rows are all the same (the target is reached), so the rest run in one mj_step call.
         self._path_writes = 0
+        #: the compiled step bound to this episode's physics (`sim.fast.binding.TaskStep`), or None
+        self._fast = None
+        #: the current control step's path was planned by `_fast` (else by `apply_action`)
+        self._fast_planned = False
         self._action_shape = (7 + self._n_fingers,)
         self._add_observables()
 
@@ -240,6 +247,16 @@ class OpenCabinetTask(composer.Task):
         # the fast test: a sum of finite numbers can only overflow, which the full test then clears
         if not math.isfinite(sum(action.tolist())) and not np.isfinite(action).all():
             raise ValueError(f"action has non-finite values: {action}")
+        fast = self._fast
+        if fast is not None:  # `apply_action` in compiled code
+            fast.native[...] = action
+            if fast.apply():
+                raise ValueError("action quaternion has zero norm")
+            target = fast.root_target.tolist()
+            self._root_target = (tuple(target[:3]), np.array(target[3:]))
+            self._substep = 0
+            self._fast_planned = True
+            return
         self.apply_action(action[:3].tolist(), action[3:7], action[7:])
 
     def apply_action(self, pos, quat: np.ndarray, fingers: np.ndarray) -> None:
@@ -260,6 +277,7 @@ class OpenCabinetTask(composer.Task):
         self._path_pos, self._path_quat, self._path_writes = self._planner.plan(
             *self.mocap_views, (x, y, z), target_quat)
         self._substep = 0
+        self._fast_planned = False
         lo, hi = self._ctrl_range
         if self._ctrl_view is not None:
             np.minimum(np.maximum(fingers, lo, out=self._ctrl_buffer), hi, out=self._ctrl_view)
@@ -269,6 +287,9 @@ class OpenCabinetTask(composer.Task):
     def before_substep(self, physics, action, random_state):
         i = self._substep
         self._substep += 1
+        if self._fast_planned:
+            self._fast.write_row(i)
+            return
         if self._path_pos is not None:
             physics.data.mocap_pos[self._mocap_id] = self._path_pos[i]
         if self._path_quat is not None:
@@ -288,6 +309,8 @@ class OpenCabinetTask(composer.Task):
         no camera (the state-only environments). Returns the names of MuJoCo instability warnings
         raised in this control step.
         """
+        if self._fast_planned:  # planned by the compiled step: its substeps
+            return warning_names(self._fast.substeps(cameras))
         model, data = self._model, self._data  # physics's, cached at the episode's start
         counts = self._warning_counts  # live view of the instability warnings' counters
         before = counts.tolist()
@@ -345,6 +368,24 @@ class OpenCabinetTask(composer.Task):
         self._model = physics.model.ptr
         #: a view of MjData's instability warning counters (`_WARNING_SLICE`)
         self._warning_counts = data.warning.number[_WARNING_SLICE]
+        self._fast, self._fast_planned = None, False
+        if self.config.compiled_step:
+            from opend_mj.sim.fast import ddot_pointer, library
+            from opend_mj.sim.fast.binding import TaskStep
+
+            lib = library()
+            if lib is not None and TaskStep.supports(self):
+                self._fast = TaskStep(lib, self, physics, ddot_pointer(), _warning_ids)
+
+    def mocap_path(self) -> tuple[np.ndarray | None, np.ndarray | None, int]:
+        """The mocap's path of the current control step: (position rows (n, 3) or None where the
+        position does not move, quaternion rows (n, 4) or None where it does not turn, how many
+        substeps change the pose), from whichever step planned it (compiled or Python)."""
+        if self._fast_planned:
+            return self._fast.path()
+        pos = None if self._path_pos is None else np.array(self._path_pos, float)
+        quat = None if self._path_quat is None else np.array(self._path_quat, float)
+        return pos, quat, self._path_writes if pos is not None or quat is not None else 0
 
     def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
@@ -410,6 +451,12 @@ _warning_ids = [int(w) for w in _INSTABILITY_WARNINGS]
 #: and each instability warning's position in it (`_INSTABILITY_WARNINGS` order)
 _WARNING_SLICE = slice(min(_warning_ids), max(_warning_ids) + 1)
 _WARNING_POSITIONS = [(name, i - min(_warning_ids)) for name, i in zip(_WARNING_NAMES, _warning_ids)]
+
+
+def warning_names(bits: int) -> list[str]:
+    """The instability warnings whose bits are set (bit k: the k-th of `_INSTABILITY_WARNINGS`; the
+    compiled step's status bits)."""
+    return [name for k, name in enumerate(_WARNING_NAMES) if bits >> k & 1] if bits else []
 
 
 class OpenDEnvironment(composer.Environment):
