@@ -193,14 +193,15 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     def first_action(checkpoint):
         agent = BCAgent(checkpoint=checkpoint)
         agent.reset(episode)
-        agent._centre, agent._ctx = feats[:3], torch.from_numpy(context_features(feats, instruction))[None]
+        ctx = torch.from_numpy(context_features(feats, instruction))[None]
+        agent._centre, agent._ctx = feats[:3], [ctx] * len(agent.models)
         return agent.act(obs), agent
 
     action, agent = first_action(pair)
     assert len(agent.models) == 2
     steps = torch.from_numpy(np.repeat(step_features({k: v[None] for k, v in obs.items()}, feats[:3]), 4, axis=0))[None]
     with torch.no_grad():
-        mean = np.mean([m.actions(agent._ctx, steps)[0].numpy() for m in agent.models], axis=0)
+        mean = np.mean([m.actions(agent._ctx[0], steps)[0].numpy() for m in agent.models], axis=0)
     np.testing.assert_allclose(action, decode_action(mean[0], feats[:3], agent._low, agent._high), atol=1e-6)
     single, _ = first_action(str(ckpts["s0"]))
     assert not np.allclose(single, action)

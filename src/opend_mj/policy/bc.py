@@ -87,14 +87,15 @@ class BCAgent:
         self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
         from opend_mj.sim.envs import instruction_onehot
 
-        # the percept numbers this checkpoint was trained with (older ones: the first 22 of today's)
-        self._percept_dim = int(ckpt["dims"]["ctx"]) - len(instruction_onehot(episode.instruction))
+        # the percept numbers each checkpoint was trained with (older ones: the first 22 of today's)
+        codes = len(instruction_onehot(episode.instruction))
+        self._percept_dims = [int(k["dims"]["ctx"]) - codes for _, _, k in members]
         default = np.mean([k.get("stop_time", k.get("max_time", episode.time_limit)) for _, _, k in members])
         self._max_time = float(self.stop_time if self.stop_time is not None else default)
         self._decay = float(self.ensemble_decay if self.ensemble_decay is not None
                             else np.mean([c.ensemble_decay for _, c, _ in members]))
         self._episode = episode
-        self._ctx = None
+        self._ctx = None  # one context per member
         self._centre = None
         self._steps: list[np.ndarray] = []
         self._preds: list[np.ndarray] = []  # prediction made at step i (chunk, A), kept while it covers a step
@@ -114,9 +115,10 @@ class BCAgent:
             if self.percept is None:
                 self.stopped = "locate"
                 return None
-            vec = self.percept.vector()[:self._percept_dim]
+            vec = self.percept.vector()
             self._centre = vec[:3]
-            self._ctx = torch.from_numpy(context_features(vec, obs["instruction"]))[None]
+            self._ctx = [torch.from_numpy(context_features(vec[:n], obs["instruction"]))[None]
+                         for n in self._percept_dims]
         if float(obs["time"][0]) >= self._max_time:
             self.stopped = "done"
             return None
@@ -127,7 +129,7 @@ class BCAgent:
         rows = [max(t - lag, 0) for lag in self.config.lags]
         steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]
         with torch.no_grad():
-            chunk = np.mean([m.actions(self._ctx, steps)[0].numpy() for m in self.models], axis=0)
+            chunk = np.mean([m.actions(c, steps)[0].numpy() for m, c in zip(self.models, self._ctx)], axis=0)
         self._preds.append(chunk)
         k = self.config.chunk
         first = max(0, t - k + 1)

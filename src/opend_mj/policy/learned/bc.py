@@ -274,8 +274,10 @@ def load_policy(path, device: str = "cpu"):
 
 #: ``format`` of a file that bundles several checkpoints into one seed ensemble (:func:`bundle_policies`).
 ENSEMBLE_FORMAT = "opend-bc-ensemble"
-#: What the members of an ensemble must share: they predict the same chunk from the same inputs.
-_MEMBER_KEYS = ("hand", "dims", "finger_low", "finger_high")
+#: What the members of an ensemble must share: they predict the same chunk from the same step
+#: inputs (the context may differ in length: checkpoints of before the hinge line read fewer percept numbers).
+_MEMBER_KEYS = ("hand", "finger_low", "finger_high")
+_MEMBER_DIMS = ("step", "act")
 _MEMBER_CONFIG = ("chunk", "lags")
 
 
@@ -293,7 +295,7 @@ def checkpoint_paths(spec) -> list:
 def load_policies(paths, device: str = "cpu") -> list:
     """``[(model, BCConfig, checkpoint dict), ...]`` of the files ``paths``, each a checkpoint of
     `opend train-policy` or an ensemble bundle (:func:`bundle_policies`, every member listed); the
-    members must agree on the hand, the input and action sizes, the finger ranges, the chunk and
+    members must agree on the hand, the step and action sizes, the finger ranges, the chunk and
     the lags (an error names the file that does not)."""
     from pathlib import Path
 
@@ -318,6 +320,10 @@ def load_policies(paths, device: str = "cpu") -> list:
             if ckpt.get(k) != first.get(k):
                 raise ValueError(f"{path}: its {k} ({ckpt.get(k)}) differs from {first_path}'s ({first.get(k)}); "
                                  "an ensemble's members must predict the same actions from the same inputs")
+        for k in _MEMBER_DIMS:
+            if ckpt["dims"][k] != first["dims"][k]:
+                raise ValueError(f"{path}: its {k} size ({ckpt['dims'][k]}) differs from {first_path}'s "
+                                 f"({first['dims'][k]})")
         for k in _MEMBER_CONFIG:
             if getattr(config, k) != getattr(first_config, k):
                 raise ValueError(f"{path}: its {k} ({getattr(config, k)}) differs from {first_path}'s "
