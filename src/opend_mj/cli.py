@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "replay": "opend_mj.commands.teleop:replay",
     "demos": "opend_mj.commands.demos:demos",
     "train-policy": "opend_mj.commands.demos:train_policy",
+    "bundle-policy": "opend_mj.commands.demos:bundle_policy",
 }
 
 

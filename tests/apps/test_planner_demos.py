@@ -130,6 +130,83 @@ def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path
     assert again.exit_code == 0 and "0 episodes run, 1 already done" in again.output
 
 
+def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, small_dataset, tmp_path):
+    """Checkpoints of two seeds run as one agent (``checkpoint=a.pt,b.pt``), which averages the two
+    models' chunks; `opend bundle-policy` writes the same ensemble as one file (same episode, same
+    record), with its ensemble_decay as the default; members that predict different chunks are refused."""
+    import torch
+
+    from opend_mj.evaluation.results import load_results
+    from opend_mj.policy.learned.bc import load_policies
+
+    out, _ = demos_file
+    ckpts = {}
+    for name, extra in (("s0", ["--seed", "0"]), ("s1", ["--seed", "1"]), ("c5", ["--chunk", "5"])):
+        ckpts[name] = tmp_path / f"bc_{name}.pt"
+        result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out",
+                                           str(ckpts[name]), "--steps", "20", "--batch-size", "16", "--d-model", "16",
+                                           "--no-progress", *extra])
+        assert result.exit_code == 0, result.output
+    pair = f"{ckpts['s0']},{ckpts['s1']}"
+    bundle = tmp_path / "bundle.pt"
+    result = CliRunner().invoke(main, ["bundle-policy", str(ckpts["s0"]), str(ckpts["s1"]), "--out", str(bundle),
+                                       "--ensemble-decay", "0.1"])
+    assert result.exit_code == 0 and "2 members" in result.output, result.output
+    members = load_policies([bundle])
+    assert len(members) == 2 and all(c.ensemble_decay == 0.1 for _, c, _ in members)
+    # the ensemble's prediction is the mean of its members' (the agent averages exactly these)
+    ctx, steps = torch.randn(1, members[0][2]["dims"]["ctx"]), torch.randn(1, 4, members[0][2]["dims"]["step"])
+    a, b = (m.actions(ctx, steps) for m, _, _ in members)
+    assert not torch.allclose(a, b)
+    wrong = CliRunner().invoke(main, ["bundle-policy", str(ckpts["s0"]), str(ckpts["c5"]), "--out",
+                                      str(tmp_path / "bad.pt")])
+    assert wrong.exit_code != 0 and "bc_c5.pt" in wrong.output and "chunk" in wrong.output
+    assert not (tmp_path / "bad.pt").exists()
+
+    def run(name, *policy_args):
+        results = tmp_path / f"{name}.jsonl"
+        args = ["run", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka", "--limit", "1",
+                "--out", str(results), "--policy", "bc"]
+        for arg in policy_args:
+            args += ["--policy-arg", arg]
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 0, result.output
+        (record,) = load_results(results)
+        assert "error" not in record, record.get("error_reason")
+        return {k: record[k] for k in ("success", "open_ratio", "joint_value", "steps", "agent_stop")}
+
+    listed = run("listed", f"checkpoint={pair}", "ensemble_decay=0.1")
+    assert run("bundled", f"checkpoint={bundle}") == listed
+
+    # the first action of a demo's first step: the decoded mean of the two members' chunks
+    from types import SimpleNamespace
+
+    from opend_mj.apps.demos import read_demos
+    from opend_mj.policy.bc import BCAgent
+    from opend_mj.policy.learned.bc import STEP_KEYS, context_features, decode_action, step_features
+
+    demo = read_demos(out)[1][0]
+    feats, instruction = np.asarray(demo.obs["handle_features"][0], float), demo.attrs["instruction"]
+    obs = {k: np.asarray(demo.obs[k][0]) for k in STEP_KEYS}
+    episode = SimpleNamespace(hand="franka", instruction=instruction, time_limit=15.0, camera_view=None)
+
+    def first_action(checkpoint):
+        agent = BCAgent(checkpoint=checkpoint)
+        agent.reset(episode)
+        ctx = torch.from_numpy(context_features(feats, instruction))[None]
+        agent._centre, agent._ctx = feats[:3], [ctx] * len(agent.models)
+        return agent.act(obs), agent
+
+    action, agent = first_action(pair)
+    assert len(agent.models) == 2
+    steps = torch.from_numpy(np.repeat(step_features({k: v[None] for k, v in obs.items()}, feats[:3]), 4, axis=0))[None]
+    with torch.no_grad():
+        mean = np.mean([m.actions(agent._ctx[0], steps)[0].numpy() for m in agent.models], axis=0)
+    np.testing.assert_allclose(action, decode_action(mean[0], feats[:3], agent._low, agent._high), atol=1e-6)
+    single, _ = first_action(str(ckpts["s0"]))
+    assert not np.allclose(single, action)
+
+
 def test_dart_noise_labels_are_the_planners_clean_actions(small_dataset, tmp_path):
     """With action noise (DART) the scene is stepped with the planner's action plus a smooth offset,
     the stored labels are the planner's own clean actions, and replay (of the sent actions)

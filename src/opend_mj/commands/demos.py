@@ -100,3 +100,21 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     last = summary["history"][-1] if summary["history"] else {}
     click.echo(f"{summary['demos']} demos ({summary['samples']} steps, {summary['cabinets']} cabinets), "
                f"{summary['parameters']} parameters, {summary['seconds']:.0f} s; last {last} -> {out}")
+
+
+@click.command("bundle-policy")
+@click.argument("checkpoints", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="The bundle (one file; `opend run --policy bc --policy-arg checkpoint=OUT` or checkpoints/bc_<hand>.pt).")
+@click.option("--ensemble-decay", type=float, default=None,
+              help="The temporal ensemble's weight decay that the bundle uses by default [each member's own].")
+def bundle_policy(checkpoints, out, ensemble_decay):
+    """Bundle behaviour-cloning checkpoints (e.g. trained with different --seed) into one seed ensemble."""
+    from opend_mj.policy.learned.bc import bundle_policies
+
+    try:
+        summary = bundle_policies(list(checkpoints), out, ensemble_decay=ensemble_decay)
+    except (ValueError, KeyError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(f"{summary['members']} members (seeds {summary['seeds']}), ensemble_decay "
+               f"{summary['ensemble_decay']:g}, stop {summary['stop_time']:.2f} s -> {out}")

@@ -5,7 +5,11 @@ instructed handle in the RGB-D image, and the planner's perception back-projects
 (`policy.learned.bc.perceive_handle`); from then on, every control step, the transformer reads that
 handle, the instruction and the hand's own state (`policy.learned.bc`) and predicts the next
 ``chunk`` actions; the action sent blends every prediction made for this step, oldest weighted most
-(ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). The agent stops
+(ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). Several
+checkpoints (``checkpoint=a.pt,b.pt,c.pt``, or one bundle file of `opend bundle-policy`) form a seed
+ensemble: every step, each model predicts its chunk from the same inputs and the agent averages
+them before the temporal blend (models trained from different seeds err differently; their mean
+errs less). The agent stops
 (returns None) where the solver finds no handle, and at ``stop_time`` (default: the checkpoint's,
 the time by which 95 % of its training demonstrations had ended, holding the opened part; the
 protocol's 15 s limit applies in any case).
@@ -19,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import context_features, decode_action, load_policy, step_features
+from opend_mj.policy.learned.bc import checkpoint_paths, context_features, decode_action, load_policies, step_features
 
 
 def default_checkpoint(hand: str) -> Path:
@@ -35,12 +39,14 @@ def default_checkpoint(hand: str) -> Path:
 class BCAgent:
     """A behaviour-cloning policy behind the agent interface (`opend_mj.policy.agents`).
 
-    ``checkpoint``: a file of `opend train-policy` (default ``checkpoints/bc_<hand>.pt``);
+    ``checkpoint``: a file of `opend train-policy` or `opend bundle-policy` (default
+    ``checkpoints/bc_<hand>.pt``), or several separated by commas: their predictions are averaged;
     ``solver``: the handle solver that reads the first image (never one that needs ground truth);
     ``threads``: torch CPU threads (1 keeps parallel episodes from competing); ``stop_time``: s of
     simulated time after which the agent stops (default: the checkpoint's ``stop_time``);
     ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
-    values weight the newest predictions most)."""
+    values weight the newest predictions most). Over several checkpoints, the defaults of
+    ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
 
     control = "absolute"
     images = "first"
@@ -72,19 +78,24 @@ class BCAgent:
         import torch
 
         torch.set_num_threads(self.threads)
-        path = Path(self.checkpoint) if self.checkpoint else default_checkpoint(episode.hand)
-        self.model, self.config, ckpt = load_policy(path)
+        paths = checkpoint_paths(self.checkpoint) if self.checkpoint else [default_checkpoint(episode.hand)]
+        members = load_policies(paths)
+        self.models = [m for m, _, _ in members]
+        _, self.config, ckpt = members[0]
         if ckpt.get("hand") not in (None, episode.hand):
-            raise ValueError(f"{path}: trained for the {ckpt['hand']} hand, not {episode.hand}")
+            raise ValueError(f"{paths[0]}: trained for the {ckpt['hand']} hand, not {episode.hand}")
         self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
         from opend_mj.sim.envs import instruction_onehot
 
-        # the percept numbers this checkpoint was trained with (older ones: the first 22 of today's)
-        self._percept_dim = int(ckpt["dims"]["ctx"]) - len(instruction_onehot(episode.instruction))
-        default = ckpt.get("stop_time", ckpt.get("max_time", episode.time_limit))
+        # the percept numbers each checkpoint was trained with (older ones: the first 22 of today's)
+        codes = len(instruction_onehot(episode.instruction))
+        self._percept_dims = [int(k["dims"]["ctx"]) - codes for _, _, k in members]
+        default = np.mean([k.get("stop_time", k.get("max_time", episode.time_limit)) for _, _, k in members])
         self._max_time = float(self.stop_time if self.stop_time is not None else default)
+        self._decay = float(self.ensemble_decay if self.ensemble_decay is not None
+                            else np.mean([c.ensemble_decay for _, c, _ in members]))
         self._episode = episode
-        self._ctx = None
+        self._ctx = None  # one context per member
         self._centre = None
         self._steps: list[np.ndarray] = []
         self._preds: list[np.ndarray] = []  # prediction made at step i (chunk, A), kept while it covers a step
@@ -104,9 +115,10 @@ class BCAgent:
             if self.percept is None:
                 self.stopped = "locate"
                 return None
-            vec = self.percept.vector()[:self._percept_dim]
+            vec = self.percept.vector()
             self._centre = vec[:3]
-            self._ctx = torch.from_numpy(context_features(vec, obs["instruction"]))[None]
+            self._ctx = [torch.from_numpy(context_features(vec[:n], obs["instruction"]))[None]
+                         for n in self._percept_dims]
         if float(obs["time"][0]) >= self._max_time:
             self.stopped = "done"
             return None
@@ -117,13 +129,12 @@ class BCAgent:
         rows = [max(t - lag, 0) for lag in self.config.lags]
         steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]
         with torch.no_grad():
-            chunk = self.model.actions(self._ctx, steps)[0].numpy()
+            chunk = np.mean([m.actions(c, steps)[0].numpy() for m, c in zip(self.models, self._ctx)], axis=0)
         self._preds.append(chunk)
         k = self.config.chunk
         first = max(0, t - k + 1)
         covering = [self._preds[i][t - i] for i in range(first, t + 1)]  # oldest first
-        decay = self.config.ensemble_decay if self.ensemble_decay is None else self.ensemble_decay
-        w = np.exp(-decay * np.arange(len(covering)))
+        w = np.exp(-self._decay * np.arange(len(covering)))
         blended = (np.asarray(covering) * w[:, None]).sum(axis=0) / w.sum()
         for i in range(first):  # predictions no longer covering any step
             self._preds[i] = None

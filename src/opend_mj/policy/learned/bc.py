@@ -272,6 +272,104 @@ def load_policy(path, device: str = "cpu"):
                            "opend train-policy", build, device=device)
 
 
-__all__ = ["BCConfig", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
+#: ``format`` of a file that bundles several checkpoints into one seed ensemble (:func:`bundle_policies`).
+ENSEMBLE_FORMAT = "opend-bc-ensemble"
+#: What the members of an ensemble must share: they predict the same chunk from the same step
+#: inputs (the context may differ in length: checkpoints of before the hinge line read fewer percept numbers).
+_MEMBER_KEYS = ("hand", "finger_low", "finger_high")
+_MEMBER_DIMS = ("step", "act")
+_MEMBER_CONFIG = ("chunk", "lags")
+
+
+def checkpoint_paths(spec) -> list:
+    """The checkpoint files of a ``checkpoint=`` value: one path, or several separated by commas
+    (a seed ensemble whose predictions are averaged)."""
+    from pathlib import Path
+
+    parts = [s.strip() for s in str(spec).split(",")]
+    if not all(parts):
+        raise ValueError(f"checkpoint={spec!r}: an empty path between commas")
+    return [Path(s) for s in parts]
+
+
+def load_policies(paths, device: str = "cpu") -> list:
+    """``[(model, BCConfig, checkpoint dict), ...]`` of the files ``paths``, each a checkpoint of
+    `opend train-policy` or an ensemble bundle (:func:`bundle_policies`, every member listed); the
+    members must agree on the hand, the step and action sizes, the finger ranges, the chunk and
+    the lags (an error names the file that does not)."""
+    from pathlib import Path
+
+    import torch
+
+    members = []
+    for path in (Path(p) for p in paths):
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no behaviour-cloning policy checkpoint; train one with "
+                                    "`opend train-policy` (or pass checkpoint=)")
+        head = torch.load(path, map_location="cpu", weights_only=False)
+        if head.get("format") == ENSEMBLE_FORMAT:
+            key = ("ensemble", str(path.resolve()), device)
+            if key not in _BUNDLES:
+                _BUNDLES[key] = [_member(m, device) for m in head["members"]]
+            members += [(m, c, k, path) for m, c, k in _BUNDLES[key]]
+        else:
+            members.append((*load_policy(path, device=device), path))
+    first_model, first_config, first, first_path = members[0]
+    for _, config, ckpt, path in members[1:]:
+        for k in _MEMBER_KEYS:
+            if ckpt.get(k) != first.get(k):
+                raise ValueError(f"{path}: its {k} ({ckpt.get(k)}) differs from {first_path}'s ({first.get(k)}); "
+                                 "an ensemble's members must predict the same actions from the same inputs")
+        for k in _MEMBER_DIMS:
+            if ckpt["dims"][k] != first["dims"][k]:
+                raise ValueError(f"{path}: its {k} size ({ckpt['dims'][k]}) differs from {first_path}'s "
+                                 f"({first['dims'][k]})")
+        for k in _MEMBER_CONFIG:
+            if getattr(config, k) != getattr(first_config, k):
+                raise ValueError(f"{path}: its {k} ({getattr(config, k)}) differs from {first_path}'s "
+                                 f"({getattr(first_config, k)})")
+    return [(m, c, k) for m, c, k, _ in members]
+
+
+_BUNDLES: dict = {}
+
+
+def _member(ckpt: dict, device: str):
+    config = BCConfig.from_dict(ckpt["config"])
+    dims = ckpt["dims"]
+    model = build_model(dims["ctx"], dims["step"], dims["act"], config)
+    model.load_state_dict({k: v.float() for k, v in ckpt["model"].items()})
+    return model.eval().to(device), config, ckpt
+
+
+def bundle_policies(paths, out, ensemble_decay: float | None = None) -> dict:
+    """Write the checkpoints ``paths`` (checked as :func:`load_policies` checks them) into one file
+    ``out`` that `opend run --policy bc` loads as their ensemble; ``ensemble_decay`` (the temporal
+    ensemble's weight decay per step of age) becomes every member's default where given. Returns
+    the bundle's summary."""
+    from pathlib import Path
+
+    import torch
+
+    load_policies(paths)  # the same checks as at run time, before anything is written
+    members = []
+    for path in paths:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        members += ckpt["members"] if ckpt.get("format") == ENSEMBLE_FORMAT else [ckpt]
+    if ensemble_decay is not None:
+        members = [{**m, "config": {**m["config"], "ensemble_decay": float(ensemble_decay)}} for m in members]
+    first = members[0]
+    summary = {"members": len(members), "sources": [str(p) for p in paths], "hand": first["hand"],
+               "seeds": [m["config"].get("seed") for m in members],
+               "ensemble_decay": float(np.mean([m["config"].get("ensemble_decay", 0.01) for m in members])),
+               "stop_time": float(np.mean([m.get("stop_time", m.get("max_time", 0.0)) for m in members]))}
+    bundle = {"format": ENSEMBLE_FORMAT, "members": members, "hand": first["hand"], "summary": summary}
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(bundle, out)
+    return summary
+
+
+__all__ = ["BCConfig", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
            "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
            "percept_vector", "quat_from_rot6", "rot6", "step_features"]
