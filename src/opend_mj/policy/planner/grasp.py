@@ -317,5 +317,20 @@ class GraspGeometry:
             shift = steps[min(g.attempt, len(steps) - 1)]
             new = GraspChoice(g.style, g.orientation, g.quat, self.state.first_pos + shift * g.axis, g.pre,
                               g.closed, g.attempt + 1)
+        if state.slides is not None and g.style not in FROM_ABOVE:
+            new = self._fingers_against_slide(new, state.direction, result)
         result.events.append({"regrasp": new.to_dict()})
         return new
+
+    def _fingers_against_slide(self, g: GraspChoice, direction, result: PlanResult) -> GraspChoice:
+        """A panel slid along its front is pushed by the curled fingers: the hook round a bar is
+        closed on the fingers' side (the middle segments) and open on the palm's, so the fingers
+        point against the slide ``direction`` (world unit vector; the hand turned half a turn about
+        its approach axis where they point along it)."""
+        fingers = quat_to_mat(g.quat)[:, 1]
+        if self.spec.hand_type == "parallel_gripper" or float(fingers @ np.asarray(direction, float)) <= 0.5:
+            return g
+        quat = quat_mul(g.quat, yaw_quat(math.pi))
+        result.events.append({"slide_fingers_turned": [round(float(v), 3) for v in direction]})
+        return GraspChoice(g.style, g.orientation, quat, g.pos, g.pre, g.closed, g.attempt, probe=g.probe,
+                           press=g.press)
