@@ -331,6 +331,9 @@ class GraspGeometry:
         if self.spec.hand_type == "parallel_gripper" or float(fingers @ np.asarray(direction, float)) <= 0.5:
             return g
         quat = quat_mul(g.quat, yaw_quat(math.pi))
+        pos = g.pos
+        if g.style == "hook" and self.hand.hook_slide:  # the bar in the curl, as a door's (hook_slide)
+            pos = pos + self.hand.hook_slide * fingers  # the turned fingers point along -fingers
         result.events.append({"slide_fingers_turned": [round(float(v), 3) for v in direction]})
-        return GraspChoice(g.style, g.orientation, quat, g.pos, g.pre, g.closed, g.attempt, probe=g.probe,
+        return GraspChoice(g.style, g.orientation, quat, pos, g.pre, g.closed, g.attempt, probe=g.probe,
                            press=g.press)
