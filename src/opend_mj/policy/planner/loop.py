@@ -203,9 +203,6 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
                 return status, state, grasp
             if status == "stuck":  # a drawer that did not come out: slide it along its front
                 status = "slipped"
-                # its handle is still where it was seen: where the hand last felt touch (a hand
-                # sliding off the bar, several cm out) is no place to grasp it again
-                state.last_held = None
                 if not self.next_slide(state, result):
                     break
             if status == "slipped" and (state.swung() >= cfg.pulling.door_done_deg if door
