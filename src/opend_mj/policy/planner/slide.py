@@ -5,9 +5,9 @@ within ``PullConfig.drawer_stuck_travel``) is grasped again and slid along its f
 (a vertical bar is pushed sideways, a horizontal one up or down: a bar is mounted across a panel's
 direction of travel, at its leading edge). The panel's body lies on the side where its front plane
 reaches farther from the handle in the depth image (:func:`~opend_mj.policy.perception.door_edges`,
-:func:`~opend_mj.policy.perception.door_edges_vertical`); it is slid that way first, then the other. The grasp for the slide (at the depth the handle was
-seen, a dexterous hand's fingers against the slide) is chosen by
-:meth:`~opend_mj.policy.planner.grasp.GraspGeometry.next_grasp`.
+:func:`~opend_mj.policy.perception.door_edges_vertical`); it is slid that way first, then the other.
+The grasp for the slide (at the depth the handle was seen, a dexterous hand's fingers against the
+slide) is chosen by :meth:`~opend_mj.policy.planner.grasp.GraspGeometry.next_grasp`.
 """
 
 from __future__ import annotations
