@@ -294,8 +294,9 @@ class GraspGeometry:
     def next_grasp(self, g: GraspChoice, handle, shape, state: PullState, result: PlanResult) -> GraspChoice:
         """The next try: where the grip last held (the handle moved with the part), a little deeper;
         else at the handle again, nearer then farther than the first try. A panel slid along its
-        front: at the depth the handle was seen; a dexterous hand whose fingers point along the slide
-        turned half a turn (:meth:`_turned_for_slide`)."""
+        front: at the depth the handle was seen; where the grasp that just failed had a dexterous hand's
+        fingers pointing along the slide, the hand turned half a turn (:meth:`_turned_for_slide`).
+        A try after a turned one that fails again goes where the grip last held, as it held."""
         cfg = self.config.recovery
         deeper = cfg.regrasp_deeper * (g.attempt + 1)
         turn = state.slides is not None and g.style not in FROM_ABOVE and self._fingers_along(g, state.direction)
