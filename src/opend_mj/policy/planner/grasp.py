@@ -293,9 +293,13 @@ class GraspGeometry:
 
     def next_grasp(self, g: GraspChoice, handle, shape, state: PullState, result: PlanResult) -> GraspChoice:
         """The next try: where the grip last held (the handle moved with the part), a little deeper;
-        else at the handle again, nearer then farther than the first try."""
+        else at the handle again, nearer then farther than the first try. A panel slid along its
+        front: at the depth the handle was seen; where the grasp that just failed had a dexterous hand's
+        fingers pointing along the slide, the hand turned half a turn (:meth:`_turned_for_slide`).
+        A try after a turned one that fails again goes where the grip last held, as it held."""
         cfg = self.config.recovery
         deeper = cfg.regrasp_deeper * (g.attempt + 1)
+        turn = state.slides is not None and g.style not in FROM_ABOVE and self._fingers_along(g, state.direction)
         if g.style in FROM_ABOVE:  # from above again at the planned height (deeper is the floor): where
             # the bar was last held (a part that came out part way); a hook that never held found no
             # gap behind the bar (a solid profile seen as a bar): the fingers press on its top instead
@@ -308,14 +312,40 @@ class GraspGeometry:
             new = GraspChoice(style, g.orientation, g.quat, pos, g.pre, g.closed,
                               g.attempt + 1, probe=g.probe, press=g.press)
         elif state.last_held is not None:  # the handle slid out toward the fingertips: go deeper there
-            pos, quat = state.last_held
-            quat = np.asarray(quat, float)
-            new = GraspChoice(g.style, g.orientation, quat, np.asarray(pos, float) + deeper * quat_axis_z(quat),
-                              g.pre, g.closed, g.attempt + 1)
+            pos, quat = np.asarray(state.last_held[0], float), np.asarray(state.last_held[1], float)
+            axis = quat_axis_z(quat)
+            if state.slides is not None:
+                # a panel that did not come out: its handle is as deep as it was seen (the touch last
+                # felt may be a hand sliding off it, cm out), across the approach where it was last
+                # held (a panel drawn a little along its front)
+                pos = pos + float((self.state.first_pos - pos) @ axis) * axis
+            new = GraspChoice(g.style, g.orientation, quat, pos + deeper * axis, g.pre, g.closed, g.attempt + 1)
         else:  # nothing held yet: the bar may be nearer or farther than seen; try nearer, then farther
             steps = cfg.regrasp_offsets
             shift = steps[min(g.attempt, len(steps) - 1)]
             new = GraspChoice(g.style, g.orientation, g.quat, self.state.first_pos + shift * g.axis, g.pre,
                               g.closed, g.attempt + 1)
+        if turn:
+            new = self._turned_for_slide(new, state.direction, result)
         result.events.append({"regrasp": new.to_dict()})
         return new
+
+    def _fingers_along(self, g: GraspChoice, direction) -> bool:
+        """Whether a dexterous hand's fingers point along ``direction`` (world unit vector; within 60
+        degrees)."""
+        fingers = quat_to_mat(g.quat)[:, 1]
+        return self.spec.hand_type != "parallel_gripper" and float(fingers @ np.asarray(direction, float)) > 0.5
+
+    def _turned_for_slide(self, g: GraspChoice, direction, result: PlanResult) -> GraspChoice:
+        """A panel slid along its front is pushed by the curled fingers: the hook round a bar is
+        closed on the fingers' side (their middle segments) and open on the palm's, so the hand
+        turns half a turn about its approach axis and its fingers point against the slide
+        ``direction``; a hooked bar then lies in the fingers' curl (``hook_slide``, as on a door)."""
+        fingers = quat_to_mat(g.quat)[:, 1]
+        quat = quat_mul(g.quat, yaw_quat(math.pi))
+        pos = g.pos
+        if g.style == "hook" and self.hand.hook_slide:
+            pos = pos + self.hand.hook_slide * fingers  # back along the turned fingers (-fingers)
+        result.events.append({"slide_fingers_turned": [round(float(v), 3) for v in direction]})
+        return GraspChoice(g.style, g.orientation, quat, pos, g.pre, g.closed, g.attempt, probe=g.probe,
+                           press=g.press)

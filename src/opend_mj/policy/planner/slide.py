@@ -6,6 +6,8 @@ within ``PullConfig.drawer_stuck_travel``) is grasped again and slid along its f
 direction of travel, at its leading edge). The panel's body lies on the side where its front plane
 reaches farther from the handle in the depth image (:func:`~opend_mj.policy.perception.door_edges`,
 :func:`~opend_mj.policy.perception.door_edges_vertical`); it is slid that way first, then the other.
+The grasp for the slide (at the depth the handle was seen, a dexterous hand's fingers against the
+slide) is chosen by :meth:`~opend_mj.policy.planner.grasp.GraspGeometry.next_grasp`.
 """
 
 from __future__ import annotations
