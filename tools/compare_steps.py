@@ -23,6 +23,7 @@ import numpy as np
 import opend_mj.sim.gym_env  # noqa: F401  (registers the ids)
 from opend_mj.assets.layout import load_manifest
 from opend_mj.sim import fast
+from opend_mj.sim.scripted import reach_grasp_pull
 
 ENV_ID = "opend/OpenCabinet-v0"
 #: the sparse constraint Jacobian's index arrays, never written with a dense Jacobian
@@ -37,21 +38,6 @@ def mjdata_bytes(data, model) -> dict:
     return out
 
 
-def scripted(obs: dict, t: int, shape, rng) -> np.ndarray:
-    if t % 10 == 9:
-        return rng.uniform(-1.5, 1.5, shape)
-    a = np.zeros(shape, np.float32)
-    d = obs["handle_pos"] - obs["grasp_site_pos"]
-    if t < 140:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1), -1
-    elif t < 160:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1) * 0.3, 1
-    else:
-        a[0], a[6:] = -0.4, 1
-    a[3:6] = np.sin(t * 0.1 + np.arange(3)) * 0.3
-    return a
-
-
 def compare_cabinet(compiled, python, cabinet: str, seed: int, steps: int, rng, stats: dict) -> None:
     obs, _ = compiled.reset(seed=seed, options={"cabinet": cabinet})
     ref, _ = python.reset(seed=seed, options={"cabinet": cabinet})
@@ -60,7 +46,7 @@ def compare_cabinet(compiled, python, cabinet: str, seed: int, steps: int, rng, 
     same = lambda a, b: list(a) == list(b) and all(a[k].tobytes() == b[k].tobytes() for k in a)  # noqa: E731
     assert same(obs, ref), "reset"
     for t in range(steps):
-        action = scripted(obs, t, compiled.action_space.shape, rng)
+        action = reach_grasp_pull(obs, t, compiled.action_space.shape, rng)
         obs, reward, terminated, truncated, info = compiled.step(action)
         ref = python.step(action)
         assert same(obs, ref[0]) and (reward, terminated, truncated) == ref[1:4], f"step {t}"

@@ -153,21 +153,17 @@ def test_no_push_recovery_without_the_time_it_needs():
     assert planner.door_arc(state) is not None  # the arc is known: only the time held the push back
 
 
-def test_no_push_where_the_camera_sees_the_door_front_not_moving():
+def test_no_push_where_the_camera_sees_the_door_front_not_moving(grasp_scenes):
     """Before pushing a lost door open from inside, the planner looks: where too little of the front
     around the handle is seen coming toward the camera (the door swung wide, edge-on, or never moved
     while the hand followed its own path), it does not push, and the hand stays where it is; a robot
     that cannot look again, or ``push_look`` off, pushes as before."""
     from dataclasses import replace
-    from importlib import util
-    from pathlib import Path
 
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import Observation
 
-    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
-    scene = util.module_from_spec(spec)
-    spec.loader.exec_module(scene)
+    scene = grasp_scenes
     view = scene._view()
     bar, posts = scene._bar(thickness=0.012, gap=0.025, length=0.2, z=0.0)
     depth = scene._render(view, [bar, *posts])

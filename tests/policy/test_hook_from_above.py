@@ -6,7 +6,6 @@ Synthetic scenes for the choice; real PartNet-Mobility doors (../shared) end to 
 
 from __future__ import annotations
 
-from importlib import util
 from pathlib import Path
 
 import numpy as np
@@ -19,19 +18,12 @@ LOW_BAR_DOOR = ("45403", "joint_1")
 PRESSED_BAR_DOOR = ("45385", "joint_1")
 
 
-def _helpers():
-    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
-    module = util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_gripper_hooks_a_low_bar_from_above_where_its_level_grasp_hits_the_floor():
+def test_the_gripper_hooks_a_low_bar_from_above_where_its_level_grasp_hits_the_floor(grasp_scenes):
     from opend_mj.policy.planner.clearance import clearances, outline_for
     from opend_mj.sim.hands import load_spec
     from opend_mj.transforms import quat_to_mat
 
-    h = _helpers()
+    h = grasp_scenes
     spec = load_spec("franka")
     bar, posts = h._bar(thickness=0.008, gap=0.032, length=0.12, z=0.035)
     handle, shape, grasp = h._choose("franka", [bar, *posts], bar, "door", kind="door")

@@ -6,7 +6,6 @@ end to end."""
 
 from __future__ import annotations
 
-from importlib import util
 from pathlib import Path
 
 import numpy as np
@@ -17,21 +16,13 @@ SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-tr
 SLIDING_PANEL = ("45855", "joint_0")
 
 
-def _helpers():
-    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
-    module = util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def _planner_and_grasp(hand: str):
+def _planner_and_grasp(h, hand: str):
     """A planner that chose its grasp on a vertical bar of a drawer (synthetic depth), and that grasp."""
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import Observation, Planner, PlannerConfig, PlanResult
     from opend_mj.policy.solvers import get_solver
     from opend_mj.sim.hands import load_spec
 
-    h = _helpers()
     bar, posts = h._bar(thickness=0.016, gap=0.035, length=0.3, z=0.5, orientation="vertical")
     view = h._view()
     depth = h._render(view, [bar, *posts])
@@ -47,11 +38,11 @@ def _planner_and_grasp(hand: str):
 
 
 @pytest.mark.parametrize("slide_y", [1.0, -1.0])
-def test_a_panel_is_grasped_again_at_its_handle_with_the_fingers_against_the_slide(slide_y):
+def test_a_panel_is_grasped_again_at_its_handle_with_the_fingers_against_the_slide(grasp_scenes, slide_y):
     from opend_mj.policy.planner import PullState
     from opend_mj.transforms import quat_to_mat
 
-    planner, handle, shape, g, result = _planner_and_grasp("allegro")
+    planner, handle, shape, g, result = _planner_and_grasp(grasp_scenes, "allegro")
     assert g.style == "hook" and g.orientation == "vertical"
     fingers = quat_to_mat(g.quat)[:, 1]
     assert abs(fingers[1]) > 0.99  # along the front, across the vertical bar
@@ -75,11 +66,11 @@ def test_a_panel_is_grasped_again_at_its_handle_with_the_fingers_against_the_sli
     assert again.pos[1] == pytest.approx(expected_y, abs=1e-9)
 
 
-def test_a_drawer_that_came_out_is_grasped_again_where_it_was_last_held():
+def test_a_drawer_that_came_out_is_grasped_again_where_it_was_last_held(grasp_scenes):
     """No slide (the drawer came out, then the grip was lost): the handle is where the hand last held it."""
     from opend_mj.policy.planner import PullState
 
-    planner, handle, shape, g, result = _planner_and_grasp("allegro")
+    planner, handle, shape, g, result = _planner_and_grasp(grasp_scenes, "allegro")
     state = PullState(quat0=g.quat)
     state.last_held = (g.pos + np.array([-0.07, 0.0, 0.0]), g.quat)
     again = planner.next_grasp(g, handle, shape, state, result)
@@ -87,10 +78,10 @@ def test_a_drawer_that_came_out_is_grasped_again_where_it_was_last_held():
     assert np.allclose(again.quat, g.quat)
 
 
-def test_the_gripper_is_never_turned_for_a_slide():
+def test_the_gripper_is_never_turned_for_a_slide(grasp_scenes):
     from opend_mj.policy.planner import PullState
 
-    planner, handle, shape, g, result = _planner_and_grasp("franka")
+    planner, handle, shape, g, result = _planner_and_grasp(grasp_scenes, "franka")
     state = PullState(quat0=g.quat)
     state.slides = [np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0])]
     planner.next_slide(state, result)

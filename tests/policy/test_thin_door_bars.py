@@ -44,7 +44,7 @@ def test_a_thin_bar_close_to_its_door_is_held_and_the_door_opens(thin_bar_cabine
     assert rec["others_moved"] == []
 
 
-def test_the_allegro_hooks_a_bar_at_its_fingers_middle_segments():
+def test_the_allegro_hooks_a_bar_at_its_fingers_middle_segments(grasp_scenes):
     """The Allegro's hook grasp site lies ``hook_slide`` back along its finger axis from the bar, so the
     bar sits at the middle segments; a hand without a slide grasps at the bar."""
     import numpy as np
@@ -57,11 +57,7 @@ def test_the_allegro_hooks_a_bar_at_its_fingers_middle_segments():
     assert 0.02 <= slide <= 0.06
     assert HandPlannerConfig.for_hand(load_spec("franka")).hook_slide == 0.0
     # a synthetic bar 40 cm up (no low-handle rules), 12 mm thick with 25 mm behind it
-    from importlib import util
-
-    spec = util.spec_from_file_location("grasp_choice", Path(__file__).with_name("test_grasp_choice.py"))
-    helpers = util.module_from_spec(spec)
-    spec.loader.exec_module(helpers)
+    helpers = grasp_scenes
     bar, posts = helpers._bar(thickness=0.012, gap=0.025, length=0.2, z=0.4)
     handle, _, grasp = helpers._choose("allegro", [bar, *posts], bar, "door", kind="door")
     assert grasp.style == "hook"

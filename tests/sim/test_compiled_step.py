@@ -15,6 +15,7 @@ gym = pytest.importorskip("gymnasium")
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
 from opend_mj.sim import fast  # noqa: E402
 from opend_mj.sim.fast import FastStepWarning  # noqa: E402
+from opend_mj.sim.scripted import reach_grasp_pull  # noqa: E402
 
 ENV_ID = "opend/OpenCabinet-v0"
 
@@ -46,23 +47,6 @@ def _same_obs(x: dict, y: dict, where: str) -> None:
     assert list(x) == list(y), where
     for key in x:
         assert x[key].dtype == y[key].dtype and x[key].tobytes() == y[key].tobytes(), f"{where}/{key}"
-
-
-def _delta_script(obs: dict, t: int, shape, rng) -> np.ndarray:
-    """Reach the handle (privileged box centre), close the fingers on it, pull; turning the wrist all
-    the time; every tenth step a random action beyond [-1, 1] (clipped)."""
-    if t % 10 == 9:
-        return rng.uniform(-1.5, 1.5, shape)
-    a = np.zeros(shape, np.float32)
-    d = obs["handle_pos"] - obs["grasp_site_pos"]
-    if t < 140:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1), -1
-    elif t < 160:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1) * 0.3, 1
-    else:
-        a[0], a[6:] = -0.4, 1
-    a[3:6] = np.sin(t * 0.1 + np.arange(3)) * 0.3
-    return a
 
 
 def _absolute_script(obs: dict, t: int, env, rng) -> np.ndarray:
@@ -104,7 +88,7 @@ def test_compiled_env_step_gives_the_python_steps_numbers_and_mjdata_to_the_bit(
             _same_obs(obs, ref_obs, "reset")
             for t in range(260):
                 if control == "delta":
-                    action = _delta_script(obs, t, compiled.action_space.shape, rng)
+                    action = reach_grasp_pull(obs, t, compiled.action_space.shape, rng)
                 else:
                     action = _absolute_script(obs, t, compiled, rng)
                 if t % 7 == 0:

@@ -10,23 +10,9 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
+from opend_mj.sim.scripted import reach_grasp_pull  # noqa: E402
 
 ENV_ID = "opend/OpenCabinet-v0"
-
-
-def _scripted(obs: dict, t: int, shape) -> np.ndarray:
-    """Reach the handle (privileged box centre), close the fingers on it, pull; turning the wrist a
-    little all the time (so that every step plans a rotation)."""
-    a = np.zeros(shape, np.float32)
-    d = obs["handle_pos"] - obs["grasp_site_pos"]
-    if t < 140:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1), -1
-    elif t < 160:
-        a[:3], a[6:] = np.clip(d / 0.0125, -1, 1) * 0.3, 1
-    else:
-        a[0], a[6:] = -0.4, 1
-    a[3:6] = np.sin(t * 0.1 + np.arange(3)) * 0.3
-    return a
 
 
 def _same(x, y, where: str) -> None:
@@ -54,7 +40,7 @@ def test_lean_step_gives_the_reference_observations_and_rewards_to_the_bit(small
             _same(obs, ref_obs, "reset")
             assert json.dumps(info, sort_keys=True) == json.dumps(ref_info, sort_keys=True)
             for t in range(220):
-                action = _scripted(obs, t, lean.action_space.shape)
+                action = reach_grasp_pull(obs, t, lean.action_space.shape)
                 obs, reward, terminated, truncated, info = lean.step(action)
                 ref = reference.step(action)
                 _same(obs, ref[0], f"seed {seed} step {t}")
@@ -133,7 +119,7 @@ def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):
         obs, info = env.reset(seed=0)
         seen = set()
         for t in range(220):
-            obs, reward, terminated, truncated, info = env.step(_scripted(obs, t, env.action_space.shape))
+            obs, reward, terminated, truncated, info = env.step(reach_grasp_pull(obs, t, env.action_space.shape))
             ratio = info["reward_terms"]["range_ratio"]
             assert info["success"] == (ratio >= 0.02)
             assert (reward == 1.0) == (info["success"] and not info["others_moved"])

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from opend_mj.policy.planner.moves import hold, move, pressed
+from opend_mj.policy.planner.moves import hold, kept_down, move, pressed
 from opend_mj.policy.planner.records import GraspChoice, PlanResult
 from opend_mj.transforms import quat_axis_z
 
@@ -77,7 +77,7 @@ class ApproachAndClose:
         for i in range(1, n + 1):
             step = start + back * cfg.probe_distance * i / n
             if g.press:  # a hook from above stays down on the bar (:meth:`Pulling._advance`)
-                step = pressed(robot, np.array([step[0], step[1], -np.inf]), g.press, floor=float(g.pos[2]))
+                step = kept_down(robot, step, g.press, float(g.pos[2]))
             robot.step(step, g.quat, g.closed)
             if cfg.probe_distance * i / n >= cfg.probe_min:
                 now, t = self.holding(robot)

@@ -180,8 +180,9 @@ class GraspGeometry:
         front. None where none fits (event ``hook_down``).
 
         Where the gap takes no fingers and the hand has a ``press_depth``, the same pose comes down
-        on the bar's top instead ("press_down": the closed fingers pressed on it; checked against the floor and the panel where the hand's
-        lowest point meets the bar's top; the last value returned says so)."""
+        on the bar's top instead ("press_down": the closed fingers pressed on it; checked against
+        the floor and the panel where the hand's lowest point meets the bar's top; the last value
+        returned says so)."""
         hand = self.hand
         if not hand.hook_down_pitches or hand.hook_down_width <= 0.0:
             return None

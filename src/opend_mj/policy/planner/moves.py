@@ -23,6 +23,13 @@ def pressed(robot, target, press: float, floor: float | None = None) -> np.ndarr
     return out
 
 
+def kept_down(robot, target, press: float, floor: float) -> np.ndarray:
+    """``target``'s x and y at the height the press alone sets: ``press`` (m) below the grasp site,
+    not below ``floor`` (m, world z): fingers hooked or pressed from above stay down on the bar,
+    whatever height the pull or the verify's probe would aim at (:func:`pressed`)."""
+    return pressed(robot, np.array([target[0], target[1], -np.inf]), press, floor=floor)
+
+
 def move(robot, start, goal, quat, fingers, speed: float, press: float = 0.0) -> None:
     """Move the grasp-site target in a straight line from ``start`` to ``goal`` (m) at ``speed``
     (m/s; the task's mocap speed limit also applies), the site orientation and fingers held;

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from opend_mj.policy.planner.flap import FlapSteering
-from opend_mj.policy.planner.moves import pressed
+from opend_mj.policy.planner.moves import kept_down
 from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
 from opend_mj.policy.planner.slide import PanelSliding
 from opend_mj.transforms import axis_angle_quat, quat_mul, turn_about_z
@@ -237,8 +237,7 @@ class Pulling(FlapSteering, PanelSliding):
         run.target = target - lateral
         if g.press:  # a hook from above never rides up over the bar: at most ``press`` below the
             # site (fingers resting on a solid bar's top drag it by friction), not below the planned height
-            run.target = pressed(robot, np.array([run.target[0], run.target[1], -np.inf]), g.press,
-                                 floor=float(g.pos[2]))
+            run.target = kept_down(robot, run.target, g.press, float(g.pos[2]))
         robot.step(run.target, run.quat, g.closed)
         if run.door:
             state.travelled += float(np.linalg.norm(run.history[-1] - run.history[-2]))
