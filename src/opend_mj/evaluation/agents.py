@@ -6,7 +6,7 @@ JSON line per episode. What differs is who acts: each control step the agent get
 the protocol allows (`policy.agents`) and returns an action, for at most ``PROTOCOL_TIME_LIMIT``
 seconds of simulated time (900 steps at 60 Hz) or until it returns None; then the success checker
 reads the final state. Ground truth is read here only to label the record (failure stage, the
-closest the grasp site came to the handle).
+closest the grasp site and the hand's gripping surfaces came to the handle).
 
 An agent is named ``module:Class``, ``path/to/file.py:Class``, ``path/to/file.py`` (its class
 ``Agent``) or by a built-in name (`BUILTIN_POLICIES`: ``bc``, the behaviour-cloning policy);
@@ -27,7 +27,7 @@ import numpy as np
 
 from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.grading import failure_stage
-from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder
+from opend_mj.evaluation.probes import HandReach, PenetrationProbe, VideoRecorder
 from opend_mj.evaluation.runner import (
     instruction_for,
     run_episode_group,
@@ -169,6 +169,8 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     penetration = PenetrationProbe(physics.data.ptr)
     max_steps = int(round(PROTOCOL_TIME_LIMIT / task.control_timestep))
     closest = reader.probe.distance()
+    reach = HandReach(task, physics)
+    hand_closest = reach() if closest < reach.span + reach.cap else reach.cap
     steps, stopped, diverged = 0, False, False
     try:
         obs = observe(True)  # before the video's renderer opens (one renderer at a time: the planner's image)
@@ -187,7 +189,10 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
             penetration()
             if video:
                 video.capture()
-            closest = min(closest, reader.probe.distance())
+            site_distance = reader.probe.distance()
+            closest = min(closest, site_distance)
+            if site_distance < reach.span + hand_closest:
+                hand_closest = min(hand_closest, reach())
             if ts.last():  # the scene's time limit is far away: a physics instability ended it
                 diverged = True
                 break
@@ -207,7 +212,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         failed = "physics"
         values = {"success": False, "open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
     else:
-        failed = failure_stage(outcome.success, outcome.range_ratio, closest, check_locate=False)
+        failed = failure_stage(outcome.success, outcome.range_ratio, min(closest, hand_closest), check_locate=False)
     return {
         "cabinet_dir": job.cabinet_dir,
         "target_type": task.target.kind,
@@ -218,6 +223,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         **values,
         "failed_stage": failed,
         "site_to_handle": round(closest, 4),
+        "hand_to_handle": round(hand_closest, 4),
         "steps": steps,
         "agent_stopped": stopped,
         "sim_seconds": round(float(physics.data.time), 3),

@@ -78,3 +78,53 @@ class VideoRecorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             imageio.mimwrite(str(self.path), self.frames, fps=self.fps, codec="libx264", macro_block_size=1)
             self.frames = []
+
+
+class HandReach:
+    """How close the hand's gripping surfaces are to the instructed handle (metres, ground truth,
+    for labelling only): the least signed distance between any geom that carries one of the hand's
+    touch sensors (palm, finger segments, pads; every hand geom for a hand without touch sensors)
+    and any geom of the handle, by MuJoCo's convex distance (``mj_geomDistance``; below 0 where they
+    overlap), capped at ``cap``.
+
+    This, not the grasp site, says whether the hand got to the handle: grasps that hold a bar with
+    the fingers' far segments (a hook that slides the site back along the fingers, a hand lifted
+    above a low bar with its fingers pointing down) keep the site centimetres from the handle when
+    the fingers are on it."""
+
+    def __init__(self, task, physics, cap: float = 0.05):
+        import mujoco
+
+        self._distance = mujoco.mj_geomDistance
+        self._m, self._d = physics.model.ptr, physics.data.ptr
+        self.cap = float(cap)
+        hand = task.hand
+        model = hand.mjcf_model
+        geoms = []
+        for name in hand.spec.touch_sensors:
+            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
+            if geom is not None:
+                geoms.append(int(physics.bind(geom).element_id))
+        if not geoms:
+            geoms = [int(g) for g in physics.bind(model.find_all("geom")).element_id]
+        self._hand = sorted(set(geoms))
+        self._handle = [mujoco.mj_name2id(self._m, mujoco.mjtObj.mjOBJ_GEOM, f"cabinet/{g}")
+                        for g in task.target.handle_geoms]
+        self._handle = [g for g in self._handle if g >= 0]
+        #: farthest any of those geoms reaches from the grasp site at the start pose, plus 5 cm for
+        #: fingers that open wider (m): no hand geom can be nearer the handle than the site's
+        #: distance less this, so `__call__` is needed only when the site is within ``span + cap``.
+        site = int(physics.bind(hand.grasp_site).element_id)
+        d = self._d
+        self.span = 0.05 + max(float(np.linalg.norm(d.geom_xpos[g] - d.site_xpos[site])) + float(self._m.geom_rbound[g])
+                               for g in self._hand)
+
+    def __call__(self) -> float:
+        best = self.cap
+        m, d, distance, cap = self._m, self._d, self._distance, self.cap
+        for g1 in self._hand:
+            for g2 in self._handle:
+                dist = distance(m, d, g1, g2, cap, None)
+                if dist < best:
+                    best = dist
+        return float(best)

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from opend_mj.evaluation.episode import EpisodeJob, record_fields, scene_seed  # noqa: E402
 from opend_mj.evaluation.grading import failure_stage  # noqa: E402
-from opend_mj.evaluation.probes import PenetrationProbe, VideoRecorder  # noqa: E402
+from opend_mj.evaluation.probes import HandReach, PenetrationProbe, VideoRecorder  # noqa: E402
 
 
 def run_episode(job: EpisodeJob, env=None, episode=None) -> dict:
@@ -194,6 +194,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
 
     # ground-truth probes for labelling only
     probes: dict = {}
+    reach = HandReach(task, physics)
 
     def true_handle_box():
         corners = task.handle_corners(physics)
@@ -205,8 +206,10 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
             site = physics.bind(task.hand.grasp_site).xpos.copy()
             outside = np.maximum(0.0, np.maximum(lo - site, site - hi))
             probes["site_to_handle"] = float(np.linalg.norm(outside))
+            probes["hand_to_handle"] = reach()
             probes["t_grasp"] = float(physics.data.time)
         elif name == "pull":
+            probes["hand_to_handle"] = min(probes.get("hand_to_handle", reach.cap), reach())
             probes["q_pull_start"] = task.outcome(physics).range_ratio
             probes["t_pull"] = float(physics.data.time)
 
@@ -241,7 +244,8 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     outcome = task.outcome(physics)
 
     # failure stage (ground truth, for the tables)
-    failed = failure_stage(outcome.success, outcome.range_ratio, probes.get("site_to_handle", 1.0),
+    failed = failure_stage(outcome.success, outcome.range_ratio,
+                           min(probes.get("site_to_handle", 1.0), probes.get("hand_to_handle", 1.0)),
                            box=plan.box["box"] if plan.box else None, gt_box=gt_box)
     if plan.failed_stage == "language" and not outcome.success:
         failed = "language"  # the instruction was refused: the robot did not act
@@ -265,6 +269,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         "box": plan.box["box"] if plan.box else None,
         "gt_box": [round(x, 2) for x in gt_box] if gt_box else None,
         "site_to_handle": round(probes.get("site_to_handle", float("nan")), 4),
+        "hand_to_handle": round(probes.get("hand_to_handle", float("nan")), 4),
         "pulled": round(plan.pulled, 4),
         "regrasps": int(plan.regrasps),
         "grasp_style": plan.grasp_style or None,

@@ -1,0 +1,55 @@
+"""Failure stages read where the hand's gripping surfaces got, not only its grasp site: a hand whose
+fingers reached the handle is never graded as failing the approach."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from opend_mj.evaluation.episode import EpisodeJob
+from opend_mj.evaluation.grading import failure_stage
+
+
+@pytest.fixture(scope="module")
+def drawer_cabinet(tmp_path_factory) -> Path:
+    from opend_mj.assets.compiler import compile_cabinet
+    from opend_mj.assets.procedural import generate_source
+
+    root = tmp_path_factory.mktemp("reach_cabinets")
+    src = generate_source(4, 0, root / "src")  # proc_0004: a drawer stack
+    compile_cabinet(src, root / "built", cache_dir=root / "cache")
+    return root / "built" / "proc_0004"
+
+
+def _job(cab: Path, hand: str) -> EpisodeJob:
+    joint = json.loads((cab / "cabinet.json").read_text())["targets"][0]["joint"]
+    return EpisodeJob(cabinet=cab.name, cabinet_dir=str(cab), joint=joint, split="train", hand=hand,
+                      solver="oracle", use_grasp_file=False)
+
+
+def test_the_hand_far_from_the_handle_reads_the_cap(drawer_cabinet):
+    from opend_mj.evaluation.probes import HandReach
+    from opend_mj.evaluation.runner import make_episode_env
+
+    env = make_episode_env(_job(drawer_cabinet, "allegro"))
+    env.reset()
+    reach = HandReach(env.task, env.physics)
+    assert reach() == reach.cap  # the start pose is well away from the cabinet
+    assert 0.1 < reach.span < 0.4  # the Allegro's fingers reach about 11 cm past its grasp site
+
+
+@pytest.mark.parametrize("hand", ["allegro", "franka"])
+def test_a_held_handle_is_recorded_as_reached(drawer_cabinet, hand):
+    from opend_mj.evaluation.runner import run_episode
+
+    record = run_episode(_job(drawer_cabinet, hand))
+    assert record["success"]
+    assert record["hand_to_handle"] < 0.002  # fingers on the handle when the pull started
+
+
+def test_fingers_on_the_handle_are_not_an_approach_failure():
+    # a hook that holds the bar in its fingers' far segments: site 4 cm off, fingers touching
+    assert failure_stage(False, 0.0, min(0.04, 0.0), check_locate=False) == "grasp"
+    assert failure_stage(False, 0.0, min(0.04, 0.03), check_locate=False) == "approach"
