@@ -23,7 +23,7 @@ evaluate: install
 
 ## Every committed file under results/ from scratch (the README's tables come from these; about
 ## 50 min on 2 cores): oracle, CLIPort and Faster R-CNN with all four hands on the procedural test split,
-## the oracle (Shadow) and both learned solvers (all hands) at light x 0.7 and with reworded
+## the oracle (Shadow) and both learned solvers (all hands) at light x 0.7, all three with reworded
 ## instructions (the hand-written corpus of tests/data), and the 1/120 s physics step.
 HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
 RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
@@ -31,8 +31,10 @@ LEARNED_RESULTS := cliport_test cliport_test_light07 cliport_test_corpus \
 	fasterrcnn_test fasterrcnn_test_light07 fasterrcnn_test_corpus
 results: install
 	rm -f results/oracle_test.jsonl results/oracle_test_dt120.jsonl results/oracle_test_light07.jsonl \
-		$(foreach f,$(LEARNED_RESULTS),results/$(f).jsonl)
+		results/oracle_test_corpus.jsonl $(foreach f,$(LEARNED_RESULTS),results/$(f).jsonl)
 	$(RUN) $(HANDS) --solver oracle --out results/oracle_test.jsonl
+	$(RUN) $(HANDS) --solver oracle --instruction-file tests/data/instruction_corpus.csv \
+		--out results/oracle_test_corpus.jsonl
 	$(RUN) $(HANDS) --solver oracle --physics-timestep 1/120 --out results/oracle_test_dt120.jsonl
 	$(RUN) --hand shadow --solver oracle --light-scale 0.7 --out results/oracle_test_light07.jsonl
 	for s in cliport fasterrcnn; do \
@@ -40,7 +42,7 @@ results: install
 		$(RUN) $(HANDS) --solver $$s --light-scale 0.7 --out results/$${s}_test_light07.jsonl && \
 		$(RUN) $(HANDS) --solver $$s --instruction-file tests/data/instruction_corpus.csv \
 			--out results/$${s}_test_corpus.jsonl || exit 1; done
-	for f in oracle_test oracle_test_dt120 $(LEARNED_RESULTS); do \
+	for f in oracle_test oracle_test_dt120 oracle_test_corpus $(LEARNED_RESULTS); do \
 		$(BIN)/opend score results/$$f.jsonl --plot results/$$f.png > /dev/null; done
 	$(BIN)/opend report
 
