@@ -160,6 +160,10 @@ class DoorConfig:
     direction_window: int = 6
     direction_min_motion: float = 0.004
     direction_gain: float = 0.35
+    #: the observed-motion direction turns at most (the site's horizontal step) / ``min_path_radius``
+    #: rad per control step (m; None: unbounded): a door's handle moves on a circle no smaller than
+    #: this, so a faster turn is the hand sliding or twisting on the handle, not the door
+    min_path_radius: float | None = 0.12
     #: the pull direction may point back toward the cabinet (+x) at most this much (sine of the angle)
     max_pull_toward_cabinet: float = 0.35
     #: stop turning once the pull direction turned this much (deg): a door's own stop ends the pull

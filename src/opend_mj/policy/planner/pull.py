@@ -180,7 +180,7 @@ class Pulling(FlapSteering, PanelSliding):
             return
         new = state.direction + cfg.direction_gain * (motion / norm - state.direction)
         new[2] = 0.0
-        cand = new / np.linalg.norm(new)
+        cand = self._turn_bounded(state.direction, new / np.linalg.norm(new), run)
         if cand[0] > cfg.max_pull_toward_cabinet:  # never pull back into the cabinet
             cand[0] = cfg.max_pull_toward_cabinet
             lateral = math.sqrt(max(1e-9, 1 - cand[0] ** 2))
@@ -202,6 +202,25 @@ class Pulling(FlapSteering, PanelSliding):
             state.turned = ang
             state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
             run.quat = self._yawed(state, ang)
+
+    def _turn_bounded(self, direction: np.ndarray, cand: np.ndarray, run: PullRun) -> np.ndarray:
+        """``cand`` (a horizontal unit vector) turned from ``direction`` by at most the angle a
+        handle's circle of radius ``min_path_radius`` (m) turns over the site's last step: the step's
+        horizontal length over the radius (rad). A door's handle moves on a circle at least that
+        large; a motion that turns faster is the hand sliding or twisting on the handle (on a
+        narrow door, followed, it turns the pull round past the door, which then slips out)."""
+        r_min = self.config.door.min_path_radius
+        if r_min is None or len(run.history) < 2:
+            return cand
+        step = run.history[-1] - run.history[-2]
+        limit = float(np.hypot(step[0], step[1])) / r_min
+        cross = float(direction[0] * cand[1] - direction[1] * cand[0])
+        turn = math.atan2(cross, float(direction[0] * cand[0] + direction[1] * cand[1]))
+        if abs(turn) <= limit:
+            return cand
+        a = math.copysign(limit, turn)
+        c, s = math.cos(a), math.sin(a)
+        return np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1], 0.0])
 
     def _yawed(self, state: PullState, ang: float, tilt: float = 0.0) -> np.ndarray:
         """The site orientation for a pull direction turned ``ang`` (deg) about z and tilted
