@@ -215,6 +215,13 @@ class DoorConfig:
     hinge_radius_range: tuple = (0.12, 1.2)
     hinge_disagree_deg: float = 40.0
     hinge_check_distance: float = 0.03
+    #: a hinge seen in the first image is checked by the camera once the site came each of
+    #: ``hinge_look_distances`` (m) out: the front seen turning about a vertical axis is hinged
+    #: where its shift toward the camera falls to zero; a line that far from the first one
+    #: (``RecoveryConfig.hinge_agreement``) with the handle ``seen_hinge_radius`` (m) from it
+    #: replaces it (:meth:`~opend_mj.policy.planner.pull.Pulling._hinge_looked`). Empty: never
+    hinge_look_distances: tuple = (0.05, 0.08)
+    seen_hinge_radius: tuple = (0.08, 1.2)
     #: the pull direction's turn (deg) from which the pull bias applies
     bias_after_deg: float = 1.0
 

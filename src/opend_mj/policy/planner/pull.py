@@ -159,6 +159,8 @@ class Pulling(FlapSteering, PanelSliding):
         if state.flap is not None:
             self._steer_flap(site, run, state)
             return
+        if state.hinge is not None and cfg.hinge_look_distances:
+            self._hinge_looked(robot, site, run, state, result)
         if len(run.history) > cfg.direction_window:
             self._follow_motion(site, run, state, result)
         if state.hinge is not None:
@@ -313,6 +315,43 @@ class Pulling(FlapSteering, PanelSliding):
         state.hinge = np.asarray(seen, float)
         state.angle0 = math.atan2(r[1], r[0])
         result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
+
+    def _hinge_looked(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
+        """Check the hinge the pull turns about against the front seen turning: once per pull state
+        at each of ``hinge_look_distances`` (m) the site came out, a new depth image
+        (:meth:`front_seen`); a front turned about a vertical axis (its shift toward the camera
+        sloped at least ``KindConfig.front_door_slope`` across it, less than half that up it) is
+        hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
+        side that came out. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
+        the hinge seen in the first image (a front plane that runs on past the door's own edge, a
+        hinge inferred on the wrong side), and the handle is ``seen_hinge_radius`` (m) from it, the
+        pull turns about the seen line instead (the hand's yaw too). A hand that slides along a
+        horizontal bar moves where it is pulled, so its path cannot tell a wrong hinge; the
+        camera can."""
+        cfg = self.config.door
+        looks = cfg.hinge_look_distances
+        if state.hinge_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.hinge_looked]:
+            return
+        state.hinge_looked += 1
+        handle = self.state.handle
+        front = self.front_seen(robot, site) if handle is not None else None
+        if front is None or abs(front["across"]) < self.config.kind.front_door_slope \
+                or abs(front["up"]) > abs(front["across"]) / 2:
+            return
+        seen = np.array([float(handle.panel_x), float(handle.centre[1]) - front["shift"] / front["across"]])
+        off = float(np.linalg.norm(seen - state.hinge))
+        r = run.start[:2] - seen
+        radius = float(np.linalg.norm(r))
+        lo, hi = cfg.seen_hinge_radius
+        if off <= self.config.recovery.hinge_agreement or not lo <= radius <= hi:
+            return
+        t = np.array([-r[1], r[0]]) / radius
+        result.events.append({"hinge_seen_turning": {"hinge": [round(float(v), 3) for v in seen],
+                                                     "was": [round(float(v), 3) for v in state.hinge],
+                                                     "radius": round(radius, 3), "across": front["across"]}})
+        state.hinge = seen
+        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
+        state.angle0 = math.atan2(r[1], r[0])
 
     def _hinge_tangent(self, state: PullState, site: np.ndarray) -> tuple[np.ndarray, float]:
         """The opening tangent of the circle about the hinge through the site, and the door's angle
