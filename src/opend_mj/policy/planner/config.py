@@ -219,9 +219,12 @@ class DoorConfig:
     #: ``hinge_look_distances`` (m) out: the front seen turning about a vertical axis is hinged
     #: where its shift toward the camera falls to zero; a line that far from the first one
     #: (``RecoveryConfig.hinge_agreement``) with the handle ``seen_hinge_radius`` (m) from it
-    #: replaces it (:meth:`~opend_mj.policy.planner.pull.Pulling._hinge_looked`). Empty: never
+    #: replaces it (:meth:`~opend_mj.policy.planner.pull.Pulling._hinge_looked`); a front seen
+    #: more than ``hinge_look_slack`` (m) farther out at the handle than the hand came is not
+    #: this door's. Empty distances: never
     hinge_look_distances: tuple = (0.05, 0.08)
     seen_hinge_radius: tuple = (0.08, 1.2)
+    hinge_look_slack: float = 0.01
     #: the pull direction's turn (deg) from which the pull bias applies
     bias_after_deg: float = 1.0
 

@@ -322,7 +322,8 @@ class Pulling(FlapSteering, PanelSliding):
         (:meth:`front_seen`); a front turned about a vertical axis (its shift toward the camera
         sloped at least ``KindConfig.front_door_slope`` across it, less than half that up it) is
         hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
-        side that came out. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
+        side that came out. A front seen farther out at the handle than the hand that pulls it came
+        (by more than ``hinge_look_slack``, m) is another part's. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
         the hinge seen in the first image (a front plane that runs on past the door's own edge, a
         hinge inferred on the wrong side), and the handle is ``seen_hinge_radius`` (m) from it, the
         pull turns about the seen line instead (the hand's yaw too). A hand that slides along a
@@ -335,9 +336,10 @@ class Pulling(FlapSteering, PanelSliding):
         state.hinge_looked += 1
         handle = self.state.handle
         front = self.front_seen(robot, site) if handle is not None else None
+        out = float((site - run.start) @ state.base_dir)  # how far the held handle came out (m)
         if front is None or abs(front["across"]) < self.config.kind.front_door_slope \
-                or abs(front["up"]) > abs(front["across"]) / 2:
-            return
+                or abs(front["up"]) > abs(front["across"]) / 2 or front["shift"] > out + cfg.hinge_look_slack:
+            return  # no front turned about a vertical axis, or one that came out farther than the hand
         seen = np.array([float(handle.panel_x), float(handle.centre[1]) - front["shift"] / front["across"]])
         off = float(np.linalg.norm(seen - state.hinge))
         r = run.start[:2] - seen
