@@ -323,7 +323,8 @@ class Pulling(FlapSteering, PanelSliding):
         sloped at least ``KindConfig.front_door_slope`` across it, less than half that up it) is
         hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
         side that came out. A front seen farther out at the handle than the hand that pulls it came
-        (by more than ``hinge_look_slack``, m) is another part's. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
+        (by more than ``hinge_look_slack``, m; the front's shift at the handle's column times the
+        cosine of its angle is the handle's own) is another part's. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
         the hinge seen in the first image (a front plane that runs on past the door's own edge, a
         hinge inferred on the wrong side), and the handle is ``seen_hinge_radius`` (m) from it, the
         pull turns about the seen line instead (the hand's yaw too). A hand that slides along a
@@ -336,10 +337,14 @@ class Pulling(FlapSteering, PanelSliding):
         state.hinge_looked += 1
         handle = self.state.handle
         front = self.front_seen(robot, site) if handle is not None else None
-        out = float((site - run.start) @ state.base_dir)  # how far the held handle came out (m)
         if front is None or abs(front["across"]) < self.config.kind.front_door_slope \
-                or abs(front["up"]) > abs(front["across"]) / 2 or front["shift"] > out + cfg.hinge_look_slack:
-            return  # no front turned about a vertical axis, or one that came out farther than the hand
+                or abs(front["up"]) > abs(front["across"]) / 2:
+            return  # no front seen turned about a vertical axis
+        # at the handle's column the front came out (distance from the hinge) x tan(angle); the
+        # handle on it, sin(angle): what the front says of the handle, against what the hand came
+        out = float((site - run.start) @ state.base_dir)
+        if front["shift"] / math.hypot(1.0, front["across"]) > out + cfg.hinge_look_slack:
+            return  # a front that came out farther than the hand that pulls it
         seen = np.array([float(handle.panel_x), float(handle.centre[1]) - front["shift"] / front["across"]])
         off = float(np.linalg.norm(seen - state.hinge))
         r = run.start[:2] - seen
