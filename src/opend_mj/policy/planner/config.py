@@ -160,6 +160,10 @@ class DoorConfig:
     direction_window: int = 6
     direction_min_motion: float = 0.004
     direction_gain: float = 0.35
+    #: the observed-motion direction turns at most (the site's horizontal step) / ``min_path_radius``
+    #: rad per control step (m; None: unbounded): a door's handle moves on a circle no smaller than
+    #: this, so a faster turn is the hand sliding or twisting on the handle, not the door
+    min_path_radius: float | None = 0.12
     #: the pull direction may point back toward the cabinet (+x) at most this much (sine of the angle)
     max_pull_toward_cabinet: float = 0.35
     #: stop turning once the pull direction turned this much (deg): a door's own stop ends the pull
@@ -211,6 +215,16 @@ class DoorConfig:
     hinge_radius_range: tuple = (0.12, 1.2)
     hinge_disagree_deg: float = 40.0
     hinge_check_distance: float = 0.03
+    #: a hinge seen in the first image is checked by the camera once the site came each of
+    #: ``hinge_look_distances`` (m) out: the front seen turning about a vertical axis is hinged
+    #: where its shift toward the camera falls to zero; a line that far from the first one
+    #: (``RecoveryConfig.hinge_agreement``) with the handle ``seen_hinge_radius`` (m) from it
+    #: replaces it (:meth:`~opend_mj.policy.planner.pull.Pulling._hinge_looked`); a front seen
+    #: more than ``hinge_look_slack`` (m) farther out at the handle than the hand came is not
+    #: this door's. Empty distances: never
+    hinge_look_distances: tuple = (0.05, 0.08)
+    seen_hinge_radius: tuple = (0.08, 1.2)
+    hinge_look_slack: float = 0.01
     #: the pull direction's turn (deg) from which the pull bias applies
     bias_after_deg: float = 1.0
 

@@ -159,6 +159,8 @@ class Pulling(FlapSteering, PanelSliding):
         if state.flap is not None:
             self._steer_flap(site, run, state)
             return
+        if state.hinge is not None and cfg.hinge_look_distances:
+            self._hinge_looked(robot, site, run, state, result)
         if len(run.history) > cfg.direction_window:
             self._follow_motion(site, run, state, result)
         if state.hinge is not None:
@@ -180,7 +182,7 @@ class Pulling(FlapSteering, PanelSliding):
             return
         new = state.direction + cfg.direction_gain * (motion / norm - state.direction)
         new[2] = 0.0
-        cand = new / np.linalg.norm(new)
+        cand = self._turn_bounded(state.direction, new / np.linalg.norm(new), run)
         if cand[0] > cfg.max_pull_toward_cabinet:  # never pull back into the cabinet
             cand[0] = cfg.max_pull_toward_cabinet
             lateral = math.sqrt(max(1e-9, 1 - cand[0] ** 2))
@@ -202,6 +204,25 @@ class Pulling(FlapSteering, PanelSliding):
             state.turned = ang
             state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
             run.quat = self._yawed(state, ang)
+
+    def _turn_bounded(self, direction: np.ndarray, cand: np.ndarray, run: PullRun) -> np.ndarray:
+        """``cand`` (a horizontal unit vector) turned from ``direction`` by at most the angle a
+        handle's circle of radius ``min_path_radius`` (m) turns over the site's last step: the step's
+        horizontal length over the radius (rad). A door's handle moves on a circle at least that
+        large; a motion that turns faster is the hand sliding or twisting on the handle (on a
+        narrow door, followed, it turns the pull round past the door, which then slips out)."""
+        r_min = self.config.door.min_path_radius
+        if r_min is None or len(run.history) < 2:
+            return cand
+        step = run.history[-1] - run.history[-2]
+        limit = float(np.hypot(step[0], step[1])) / r_min
+        cross = float(direction[0] * cand[1] - direction[1] * cand[0])
+        turn = math.atan2(cross, float(direction[0] * cand[0] + direction[1] * cand[1]))
+        if abs(turn) <= limit:
+            return cand
+        a = math.copysign(limit, turn)
+        c, s = math.cos(a), math.sin(a)
+        return np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1], 0.0])
 
     def _yawed(self, state: PullState, ang: float, tilt: float = 0.0) -> np.ndarray:
         """The site orientation for a pull direction turned ``ang`` (deg) about z and tilted
@@ -294,6 +315,50 @@ class Pulling(FlapSteering, PanelSliding):
         state.hinge = np.asarray(seen, float)
         state.angle0 = math.atan2(r[1], r[0])
         result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
+
+    def _hinge_looked(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
+        """Check the hinge the pull turns about against the front seen turning: once per pull state
+        at each of ``hinge_look_distances`` (m) the site came out, a new depth image
+        (:meth:`front_seen`); a front turned about a vertical axis (its shift toward the camera
+        sloped at least ``KindConfig.front_door_slope`` across it, less than half that up it) is
+        hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
+        side that came out. A front seen farther out at the handle than the hand that pulls it came
+        (by more than ``hinge_look_slack``, m; the front's shift at the handle's column times the
+        cosine of its angle is the handle's own) is another part's. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
+        the hinge seen in the first image (a front plane that runs on past the door's own edge, a
+        hinge inferred on the wrong side), and the handle is ``seen_hinge_radius`` (m) from it, the
+        pull turns about the seen line instead (the hand's yaw too). A hand that slides along a
+        horizontal bar moves where it is pulled, so its path cannot tell a wrong hinge; the
+        camera can."""
+        cfg = self.config.door
+        looks = cfg.hinge_look_distances
+        if state.hinge_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.hinge_looked]:
+            return
+        state.hinge_looked += 1
+        handle = self.state.handle
+        front = self.front_seen(robot, site) if handle is not None else None
+        if front is None or abs(front["across"]) < self.config.kind.front_door_slope \
+                or abs(front["up"]) > abs(front["across"]) / 2:
+            return  # no front seen turned about a vertical axis
+        # at the handle's column the front came out (distance from the hinge) x tan(angle); the
+        # handle on it, sin(angle): what the front says of the handle, against what the hand came
+        out = float((site - run.start) @ state.base_dir)
+        if front["shift"] / math.hypot(1.0, front["across"]) > out + cfg.hinge_look_slack:
+            return  # a front that came out farther than the hand that pulls it
+        seen = np.array([float(handle.panel_x), float(handle.centre[1]) - front["shift"] / front["across"]])
+        off = float(np.linalg.norm(seen - state.hinge))
+        r = run.start[:2] - seen
+        radius = float(np.linalg.norm(r))
+        lo, hi = cfg.seen_hinge_radius
+        if off <= self.config.recovery.hinge_agreement or not lo <= radius <= hi:
+            return
+        t = np.array([-r[1], r[0]]) / radius
+        result.events.append({"hinge_seen_turning": {"hinge": [round(float(v), 3) for v in seen],
+                                                     "was": [round(float(v), 3) for v in state.hinge],
+                                                     "radius": round(radius, 3), "across": front["across"]}})
+        state.hinge = seen
+        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
+        state.angle0 = math.atan2(r[1], r[0])
 
     def _hinge_tangent(self, state: PullState, site: np.ndarray) -> tuple[np.ndarray, float]:
         """The opening tangent of the circle about the hinge through the site, and the door's angle

@@ -123,6 +123,7 @@ class PullState:
     flap: Flap | None = None  # a flap seen by the held handle's rise (kept across re-grasps)
     front_z: tuple | None = None  # the front's top and bottom edge z (m) seen in depth; () unseen
     flap_looked: int = 0  # how many times the camera looked for a flap
+    hinge_looked: int = 0  # how many times the camera looked at the front turning about its hinge
     slides: list | None = None  # directions still to slide a drawer that did not come out
     held_back: bool = False  # a direction turning back from ``peak_turn`` was not taken
     #: where the latest pull's held path starts in ``track``, and the kind (and turn, deg) it showed
