@@ -77,14 +77,19 @@ def test_image_modes_render_only_what_they_name_and_match_the_reference(small_da
             reference.close()
 
 
-@pytest.mark.parametrize("step_in_main", [False, True])
-def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, step_in_main):
+@pytest.mark.parametrize("num_envs, envs_per_worker, step_in_main, workers", [
+    (2, 1, False, 2), (2, 1, True, 1),  # an environment per process
+    (4, 2, False, 2), (4, 2, True, 1),  # 2 workers x 2; main x 2 + 1 worker x 2
+    (3, 2, False, 2)])  # the last worker takes what is left
+def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, num_envs, envs_per_worker,
+                                                                      step_in_main, workers):
     kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)  # truncated at step 15 (0.25 s)
-    envs = gym.make_vec(ENV_ID, num_envs=2, step_in_main=step_in_main, **kwargs)
-    singles = [gym.make(ENV_ID, **kwargs) for _ in range(2)]
+    envs = gym.make_vec(ENV_ID, num_envs=num_envs, step_in_main=step_in_main, envs_per_worker=envs_per_worker,
+                        **kwargs)
+    singles = [gym.make(ENV_ID, **kwargs) for _ in range(num_envs)]
     try:
-        assert type(envs).__name__ == "OpenDVectorEnv"
-        assert len(envs.unwrapped.worker_cpu_seconds()) == (1 if step_in_main else 2)
+        assert type(envs).__name__ == "OpenDVectorEnv" and envs.num_envs == num_envs
+        assert len(envs.unwrapped.worker_cpu_seconds()) == workers
         obs, info = envs.reset(seed=4)
         for i, single in enumerate(singles):
             one, one_info = single.reset(seed=4 + i)  # environment i runs the episode of seed 4 + i
@@ -110,6 +115,27 @@ def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_datas
         envs.close()
         for single in singles:
             single.close()
+
+
+def test_vector_env_layouts_and_errors_name_the_environment(small_dataset):
+    from opend_mj.sim.vector_env import env_groups
+
+    assert env_groups(5, 2, False) == (None, [range(0, 2), range(2, 4), range(4, 5)])
+    assert env_groups(4, 2, True) == (range(0, 2), [range(2, 4)])
+    assert env_groups(2, 1, True) == (range(0, 1), [range(1, 2)])
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="envs_per_worker"):
+            env_groups(4, bad, False)
+    envs = gym.make_vec(ENV_ID, num_envs=4, envs_per_worker=2, cabinets=str(small_dataset), split="all",
+                        hand="franka")
+    try:
+        envs.reset(seed=0)
+        actions = np.zeros(envs.action_space.shape)
+        actions[3, 0] = np.nan  # the second environment of worker 1
+        with pytest.raises(RuntimeError, match=r"(?s)worker 1 \(environments 2-3\).*non-finite.*in environment 3"):
+            envs.step(actions)
+    finally:
+        envs.close()
 
 
 def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):
