@@ -83,7 +83,8 @@ def test_image_modes_render_only_what_they_name_and_match_the_reference(small_da
     (3, 2, False, 2)])  # the last worker takes what is left
 def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, num_envs, envs_per_worker,
                                                                       step_in_main, workers):
-    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)  # truncated at step 15 (0.25 s)
+    # truncated at step 15 (0.25 s)
+    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)
     envs = gym.make_vec(ENV_ID, num_envs=num_envs, step_in_main=step_in_main, envs_per_worker=envs_per_worker,
                         **kwargs)
     singles = [gym.make(ENV_ID, **kwargs) for _ in range(num_envs)]
@@ -111,6 +112,13 @@ def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_datas
         assert truncated.all() and obs["time"][0, 0] == pytest.approx(15 / 60)
         obs, reward, terminated, truncated, info = envs.step(np.zeros(envs.action_space.shape))  # autoreset
         assert (reward == 0).all() and not (terminated | truncated).any() and (obs["time"][:, 0] == 0).all()
+        for i, single in enumerate(singles):  # the next episode of environment i's seed sequence
+            one, one_info = single.reset()
+            for key in one:
+                assert np.array_equal(obs[key][i], one[key]), key
+            for key in ("cabinet", "target", "room", "episode_seed", "instruction"):
+                assert info[key][i] == one_info[key], key
+        assert len(set(info["episode_seed"])) == num_envs
     finally:
         envs.close()
         for single in singles:

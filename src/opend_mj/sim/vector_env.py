@@ -5,8 +5,9 @@ processes (``spawn``: a GL context does not survive ``fork``) running ``envs_per
 environments each (1 by default). Per step the main process writes the actions into a shared array
 and writes one byte into each worker's command pipe; the worker steps its environments one after
 the other, each writing its float observation vector (float32), images, reward, flags and the
-numeric info into its row of the shared arrays, and answers with one byte on its answer pipe (plain ``os.write`` / ``os.read`` of a byte: no message framing, no pickling, no Python
-object per step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
+numeric info into its row of the shared arrays, and answers with one byte on its answer pipe
+(plain ``os.write`` / ``os.read`` of a byte: no message framing, no pickling, no Python object per
+step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
 physics warning and on an error does the answer byte say that a pickled message waits on the
 worker's control connection. gymnasium's ``AsyncVectorEnv`` instead pickles every step's info dict
 and merges it key by key in the main process (about four times the main process's CPU per step).
@@ -19,10 +20,9 @@ Observations and the step's info arrays are fresh copies; the info's episode col
 instructions (``instruction="text"``) cannot live in shared memory: use the one-hot code, or
 ``vectorization_mode="async"``.
 
-``gym.make_vec(..., step_in_main=True)`` steps environment 0 (environments 0 to
-``envs_per_worker - 1``) in the main process while the workers step the others (see
-`OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
-CPU time (for benchmarks).
+``gym.make_vec(..., step_in_main=True)`` steps the first ``envs_per_worker`` environments in the
+main process while the workers step the others (see `OpenDVectorEnv`).
+`OpenDVectorEnv.worker_cpu_seconds` reports each worker's CPU time (for benchmarks).
 """
 
 from __future__ import annotations
