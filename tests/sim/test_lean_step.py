@@ -125,6 +125,26 @@ def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_datas
             single.close()
 
 
+def test_vector_env_with_two_renderers_in_a_process_gives_each_environment_its_images(small_dataset):
+    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", obs_mode="rgbd", image_size=32)
+    envs = gym.make_vec(ENV_ID, num_envs=3, envs_per_worker=2, step_in_main=True, **kwargs)  # main x 2 + 1
+    singles = [gym.make(ENV_ID, **kwargs) for _ in range(3)]
+    try:
+        obs, _ = envs.reset(seed=7)
+        rng = np.random.default_rng(0)
+        for t in range(4):
+            for i, single in enumerate(singles):
+                one = single.reset(seed=7 + i)[0] if t == 0 else single.step(actions[i])[0]
+                for key in ("rgb", "depth", "camera_pose"):
+                    assert np.array_equal(obs[key][i], one[key]), (t, i, key)
+            actions = rng.uniform(-1, 1, envs.action_space.shape).astype(np.float32)
+            obs = envs.step(actions)[0]
+        assert len({obs["rgb"][i].tobytes() for i in range(3)}) == 3  # three different scenes
+    finally:
+        envs.close()
+        for single in singles:
+            single.close()
+
 def test_vector_env_layouts_and_errors_name_the_environment(small_dataset):
     from opend_mj.sim.vector_env import env_groups
 
