@@ -2,6 +2,7 @@
 
     python tools/bench_env.py [--cabinets cabinets] [--hand allegro] [--steps 1500] [--chunk 50]
                               [--image-steps 300] [--sizes 128,256] [--state-only]
+                              [--layouts vec1,vec2,main2,...]
 
 Made for a shared machine: every figure that is compared with another is measured in interleaved
 chunks of ``--chunk`` steps in one run (a chunk of each contestant in turn, round after round), so
@@ -19,16 +20,18 @@ the run, so that no reset falls inside a timed chunk):
   wrappers) and of ``env.unwrapped``, in one process; their ratio to the ceiling. The default step
   is the compiled one (`opend_mj.sim.fast`) where it loads; the Python step (``compiled_step=False``,
   the same numbers) is timed beside it, in the same interleaved chunks.
-- vector: `OpenDVectorEnv` (``gym.make_vec``'s default for these ids: shared memory) with 1 and 2
-  worker processes, with 2 environments in 2 processes (``step_in_main=True``: environment 0 in the
-  main process, 1 worker), and gymnasium's ``AsyncVectorEnv`` with 2 (pickled dict observations
-  and info). Wall: steps of all environments per second; CPU: the main process's CPU per vector
-  step, a worker's CPU per step of its environment, steps per CPU second of all processes
-  together, and the speed-up over one process that 2 environments would give if every process had
-  a core of its own: 2 x (CPU per step in one process) / (the lock-step critical path: a worker's
-  step + the main process's hand-over; with ``step_in_main`` the longer of the main process's
-  step-and-hand-over and a worker's step). An estimate from CPU times: wake-up latencies are not
-  in it.
+- vector: `OpenDVectorEnv` (``gym.make_vec``'s default for these ids: shared memory) in the layouts
+  of `LAYOUTS`: an environment per process (1 and 2 worker processes; 2 environments in 2
+  processes with ``step_in_main=True``: environment 0 in the main process, 1 worker), and K
+  environments per process (``envs_per_worker=K``: 2 in 1 worker; 4 as 2 workers x 2; 4 as the
+  main process x 2 + 1 worker x 2; 8 as 2 workers x 4 and as main x 4 + 1 worker x 4), and
+  gymnasium's ``AsyncVectorEnv`` with 2 (pickled dict observations and info). Wall: steps of all
+  environments per second; CPU: the main process's CPU per vector step, a worker's CPU per step of
+  one of its environments, steps per CPU second of all processes together, and the speed-up over
+  one process that the layout would give if every process had a core of its own: N x (CPU per step
+  in one process) / (the lock-step critical path: a worker's K steps + the main process's
+  hand-over; with ``step_in_main`` the longer of the main process's steps-and-hand-over and a
+  worker's steps). An estimate from CPU times: wake-up latencies are not in it.
 - reference: two processes with an environment each stepping the same chunk at the same time with
   no hand-over between steps: what two processes give on this machine at this moment (shared
   caches and memory bandwidth, and other work on the cores, included), the bound for any lock-step
@@ -53,6 +56,20 @@ import numpy as np  # noqa: E402
 import opend_mj.sim.gym_env  # noqa: E402,F401  (registers the ids)
 
 ENV_ID = "opend/OpenCabinet-v0"
+#: vector layouts: key -> (num_envs, envs_per_worker, step_in_main, label); "async2" is gymnasium's
+LAYOUTS = {
+    "vec1": (1, 1, False, "vector env, 1 worker process"),
+    "vec2": (2, 1, False, "vector env, 2 worker processes"),
+    "main2": (2, 1, True, "**vector env, 2 processes: `step_in_main=True` + 1 worker**"),
+    "w1x2": (2, 2, False, "vector env, 2 environments in 1 worker (`envs_per_worker=2`)"),
+    "w2x2": (4, 2, False, "vector env, 4 environments: 2 workers x 2 (`envs_per_worker=2`)"),
+    "main2x2": (4, 2, True, "**vector env, 4 environments: main x 2 + 1 worker x 2** (`envs_per_worker=2, "
+                            "step_in_main=True`)"),
+    "w2x4": (8, 4, False, "vector env, 8 environments: 2 workers x 4 (`envs_per_worker=4`)"),
+    "main4x4": (8, 4, True, "**vector env, 8 environments: main x 4 + 1 worker x 4** (`envs_per_worker=4, "
+                            "step_in_main=True`)"),
+    "async2": (2, 1, False, "gymnasium AsyncVectorEnv, 2 processes"),
+}
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
@@ -151,6 +168,8 @@ class Vector:
 
     def __init__(self, base: dict, steps: int, n: int, mode: str | None = None, **extra):
         kwargs = {"vectorization_mode": mode, "vector_kwargs": {"context": "spawn"}} if mode else extra
+        # only the arguments that differ from the defaults: older OpenDVectorEnvs lack the newer ones
+        kwargs = {k: v for k, v in kwargs.items() if (k, v) not in (("step_in_main", False), ("envs_per_worker", 1))}
         self.envs = gym.make_vec(ENV_ID, num_envs=n, obs_mode="state", **kwargs, **base)
         self.n = n
         self.envs.reset(seed=list(range(n)))
@@ -229,19 +248,22 @@ class FreePair:
             proc.join(timeout=10)
 
 
-def state_and_vector(base: dict, steps: int, k: int, vector: bool = True) -> dict:
+def state_and_vector(base: dict, steps: int, k: int, layouts=tuple(LAYOUTS)) -> dict:
     """Interleaved chunks: gym.make env (compiled and Python step), the unwrapped env, raw mj_step,
-    vector envs (1, 2, async 2)."""
+    the vector envs of ``layouts`` (keys of `LAYOUTS`) and two free processes (with any layout)."""
     single = Single(base, 2 * steps + 2 * k)
     python = Single({**base, "compiled_step": False}, steps + k)  # the same episode and actions
     vectors = {}
-    if vector:
-        vectors = {"vec1": Vector(base, steps + k, 1), "vec2": Vector(base, steps + k, 2)}
+    for key in layouts:
+        n, per_worker, in_main, _ = LAYOUTS[key]
+        if key == "async2":
+            vectors[key] = Vector(base, steps + k, n, mode="async")
+            continue
         try:
-            vectors["main2"] = Vector(base, steps + k, 2, step_in_main=True)
-        except TypeError:  # an OpenDVectorEnv without step_in_main (comparing against older code)
-            pass
-        vectors["async2"] = Vector(base, steps + k, 2, mode="async")
+            vectors[key] = Vector(base, steps + k, n, step_in_main=in_main, envs_per_worker=per_worker)
+        except TypeError:  # an OpenDVectorEnv without step_in_main / envs_per_worker (older code)
+            print(f"(layout {key} not supported by this code: skipped)", flush=True)
+    if vectors:
         vectors["free2"] = FreePair(base, steps + k)
     tallies = {key: Tally() for key in ("env", "python", "unwrapped", "raw", *vectors)}
     try:
@@ -292,6 +314,8 @@ def main() -> None:
     parser.add_argument("--image-steps", type=int, default=300, help="RGB-D steps per image size")
     parser.add_argument("--sizes", default="128,256", help="RGB-D image sizes (square), comma-separated")
     parser.add_argument("--state-only", action="store_true", help="only the single-process state figures")
+    parser.add_argument("--layouts", default=",".join(LAYOUTS),
+                        help=f"vector layouts, comma-separated, of: {', '.join(LAYOUTS)}")
     args = parser.parse_args()
     from opend_mj.sim import fast
 
@@ -304,7 +328,11 @@ def main() -> None:
     print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {cpus} CPUs", flush=True)
 
     print(f"the environments' step: {step_kind}", flush=True)
-    s = state_and_vector(base, args.steps, args.chunk, vector=not args.state_only)
+    layouts = [] if args.state_only else [x for x in args.layouts.split(",") if x]
+    unknown = [x for x in layouts if x not in LAYOUTS]
+    if unknown:
+        parser.error(f"unknown layouts {unknown}: choose from {', '.join(LAYOUTS)}")
+    s = state_and_vector(base, args.steps, args.chunk, layouts)
     t, sub = s["tallies"], s["substeps"]
     raw, env, unwrapped, python = t["raw"], t["env"], t["unwrapped"], t["python"]
     ceiling, cpu_ceiling = raw.rate, raw.cpu_rate  # control steps (of `sub` mj_steps) per second
@@ -314,7 +342,7 @@ def main() -> None:
               f"{tally.cpu_rate / cpu_ceiling:.2f}, {(1 / tally.cpu_rate - 1 / cpu_ceiling) * us:.0f} us around "
               f"{us / cpu_ceiling:.0f} us of physics)", flush=True)
     images = []
-    for size in (int(x) for x in args.sizes.split(",")) if not args.state_only else ():
+    for size in (int(x) for x in args.sizes.split(",") if x) if not args.state_only else ():
         f = image_figures(base, args.image_steps, args.chunk, size)
         physics = f["raw"].rate
         both = 1.0 / (1.0 / physics + 1.0 / f["render"].rate)
@@ -348,32 +376,31 @@ def main() -> None:
     print(_row("&nbsp;&nbsp;its Python around the physics per step (CPU time)",
                f"{(1 / python.cpu_rate - 1 / cpu_ceiling) * us:.0f} us", f"physics {us / cpu_ceiling:.0f} us"))
     one_cpu = 1.0 / env.cpu_rate  # CPU seconds per step in one process
-    if args.state_only:
+    if "free2" not in t:
         return
     free = t["free2"]
     print(_row("reference: 2 independent processes, an environment each, stepping at the same time "
                "(no hand-over; CPU per step)", f"{free.rate:.0f} ({free.worker_cpu / free.steps * us:.0f} us)",
                f"{free.rate / env.rate:.2f}x 1 process (CPU per step {free.worker_cpu / free.steps / one_cpu:.2f}x)"))
-    for key, label in (("vec1", "vector env, 1 worker process"), ("vec2", "vector env, 2 worker processes"),
-                       ("main2", "**vector env, 2 processes: `step_in_main=True` + 1 worker**"),
-                       ("async2", "gymnasium AsyncVectorEnv, 2 processes")):
+    for key in LAYOUTS:
         if key not in t:
             continue
         v = t[key]
-        n = 1 if key == "vec1" else 2
-        workers = 1 if key in ("vec1", "main2") else 2
-        main_cpu = v.cpu / (v.steps / n)  # per vector step (with step_in_main: environment 0's step too)
-        worker = v.worker_cpu / (v.steps / n * workers)  # per step of a worker's environment
+        n, per_worker, in_main, label = LAYOUTS[key]
+        workers = (n - per_worker if in_main else n) // per_worker
+        main_cpu = v.cpu / (v.steps / n)  # per vector step (with step_in_main: its environments' steps too)
+        worker = v.worker_cpu / (v.steps / n * workers)  # a worker's CPU per vector step (its K steps)
         all_cpu = v.steps / (v.cpu + v.worker_cpu)
         # lock-step critical path per vector step on a core per process: the main process's own work
-        # (for step_in_main, environment 0's step and the hand-over) against the slowest worker
-        critical = max(main_cpu, worker) if key == "main2" else worker + main_cpu
-        bold = "**" if key == "main2" else ""
+        # (with step_in_main, its environments' steps and the hand-over) against the slowest worker
+        critical = max(main_cpu, worker) if in_main else worker + main_cpu
+        bold = "**" if label.startswith("**") else ""
         print(_row(f"state steps/s, {label}", f"{bold}{v.rate:.0f}{bold}",
                    f"{bold}{v.rate / env.rate:.2f}x 1 process{bold}"
-                   + (f", {v.rate / t['vec1'].rate:.2f}x 1 worker" if n == 2 else "")))
-        print(_row("&nbsp;&nbsp;CPU: main process per vector step / a worker per step / steps per CPU second "
-                   "of all processes", f"{main_cpu * us:.0f} us / {worker * us:.0f} us / {all_cpu:.0f}",
+                   + (f", {v.rate / t['vec1'].rate:.2f}x 1 worker" if n > 1 and "vec1" in t else "")))
+        print(_row("&nbsp;&nbsp;CPU: main process per vector step / a worker per step of an environment / steps per "
+                   "CPU second of all processes",
+                   f"{main_cpu * us:.0f} us / {worker / per_worker * us:.0f} us / {all_cpu:.0f}",
                    f"{all_cpu * one_cpu:.2f} of 1 process's; a core each: {n * one_cpu / critical:.2f}x 1 process"))
     for size, f, both in images:
         print(_row(f"RGB-D {size}x{size} steps/s, 1 process", f"{f['env'].rate:.0f}",

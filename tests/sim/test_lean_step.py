@@ -77,14 +77,20 @@ def test_image_modes_render_only_what_they_name_and_match_the_reference(small_da
             reference.close()
 
 
-@pytest.mark.parametrize("step_in_main", [False, True])
-def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, step_in_main):
-    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)  # truncated at step 15 (0.25 s)
-    envs = gym.make_vec(ENV_ID, num_envs=2, step_in_main=step_in_main, **kwargs)
-    singles = [gym.make(ENV_ID, **kwargs) for _ in range(2)]
+@pytest.mark.parametrize("num_envs, envs_per_worker, step_in_main, workers", [
+    (2, 1, False, 2), (2, 1, True, 1),  # an environment per process
+    (4, 2, False, 2), (4, 2, True, 1),  # 2 workers x 2; main x 2 + 1 worker x 2
+    (3, 2, False, 2)])  # the last worker takes what is left
+def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_dataset, num_envs, envs_per_worker,
+                                                                      step_in_main, workers):
+    # truncated at step 15 (0.25 s)
+    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", time_limit=0.24)
+    envs = gym.make_vec(ENV_ID, num_envs=num_envs, step_in_main=step_in_main, envs_per_worker=envs_per_worker,
+                        **kwargs)
+    singles = [gym.make(ENV_ID, **kwargs) for _ in range(num_envs)]
     try:
-        assert type(envs).__name__ == "OpenDVectorEnv"
-        assert len(envs.unwrapped.worker_cpu_seconds()) == (1 if step_in_main else 2)
+        assert type(envs).__name__ == "OpenDVectorEnv" and envs.num_envs == num_envs
+        assert len(envs.unwrapped.worker_cpu_seconds()) == workers
         obs, info = envs.reset(seed=4)
         for i, single in enumerate(singles):
             one, one_info = single.reset(seed=4 + i)  # environment i runs the episode of seed 4 + i
@@ -106,10 +112,58 @@ def test_shared_memory_vector_env_matches_single_envs_and_autoresets(small_datas
         assert truncated.all() and obs["time"][0, 0] == pytest.approx(15 / 60)
         obs, reward, terminated, truncated, info = envs.step(np.zeros(envs.action_space.shape))  # autoreset
         assert (reward == 0).all() and not (terminated | truncated).any() and (obs["time"][:, 0] == 0).all()
+        for i, single in enumerate(singles):  # the next episode of environment i's seed sequence
+            one, one_info = single.reset()
+            for key in one:
+                assert np.array_equal(obs[key][i], one[key]), key
+            for key in ("cabinet", "target", "room", "episode_seed", "instruction"):
+                assert info[key][i] == one_info[key], key
+        assert len(set(info["episode_seed"])) == num_envs
     finally:
         envs.close()
         for single in singles:
             single.close()
+
+
+def test_vector_env_with_two_renderers_in_a_process_gives_each_environment_its_images(small_dataset):
+    kwargs = dict(cabinets=str(small_dataset), split="all", hand="franka", obs_mode="rgbd", image_size=32)
+    envs = gym.make_vec(ENV_ID, num_envs=3, envs_per_worker=2, step_in_main=True, **kwargs)  # main x 2 + 1
+    singles = [gym.make(ENV_ID, **kwargs) for _ in range(3)]
+    try:
+        obs, _ = envs.reset(seed=7)
+        rng = np.random.default_rng(0)
+        for t in range(4):
+            for i, single in enumerate(singles):
+                one = single.reset(seed=7 + i)[0] if t == 0 else single.step(actions[i])[0]
+                for key in ("rgb", "depth", "camera_pose"):
+                    assert np.array_equal(obs[key][i], one[key]), (t, i, key)
+            actions = rng.uniform(-1, 1, envs.action_space.shape).astype(np.float32)
+            obs = envs.step(actions)[0]
+        assert len({obs["rgb"][i].tobytes() for i in range(3)}) == 3  # three different scenes
+    finally:
+        envs.close()
+        for single in singles:
+            single.close()
+
+def test_vector_env_layouts_and_errors_name_the_environment(small_dataset):
+    from opend_mj.sim.vector_env import env_groups
+
+    assert env_groups(5, 2, False) == (None, [range(0, 2), range(2, 4), range(4, 5)])
+    assert env_groups(4, 2, True) == (range(0, 2), [range(2, 4)])
+    assert env_groups(2, 1, True) == (range(0, 1), [range(1, 2)])
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="envs_per_worker"):
+            env_groups(4, bad, False)
+    envs = gym.make_vec(ENV_ID, num_envs=4, envs_per_worker=2, cabinets=str(small_dataset), split="all",
+                        hand="franka")
+    try:
+        envs.reset(seed=0)
+        actions = np.zeros(envs.action_space.shape)
+        actions[3, 0] = np.nan  # the second environment of worker 1
+        with pytest.raises(RuntimeError, match=r"(?s)worker 1 \(environments 2-3\).*non-finite.*in environment 3"):
+            envs.step(actions)
+    finally:
+        envs.close()
 
 
 def test_maniskill_criterion_judges_success_by_the_joint_range(small_dataset):

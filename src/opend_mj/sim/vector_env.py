@@ -1,12 +1,13 @@
 """A vector environment over the dataset whose workers write observations into shared memory.
 
-``gym.make_vec("opend/OpenCabinet-v0", num_envs=N, cabinets=...)`` builds `OpenDVectorEnv`: one
-worker process per environment (``spawn``: a GL context does not survive ``fork``), each running an
-`OpenDCore`. Per step the main process writes the actions into a shared array and writes one byte
-into each worker's command pipe; the worker steps, writes its float observation vector (float32),
-images, reward, flags and the numeric info into shared arrays, and answers with one byte on its
-answer pipe (plain ``os.write`` / ``os.read`` of a byte: no message framing, no pickling, no Python
-object per step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
+``gym.make_vec("opend/OpenCabinet-v0", num_envs=N, cabinets=...)`` builds `OpenDVectorEnv`: worker
+processes (``spawn``: a GL context does not survive ``fork``) running ``envs_per_worker`` `OpenDCore`
+environments each (1 by default). Per step the main process writes the actions into a shared array
+and writes one byte into each worker's command pipe; the worker steps its environments one after
+the other, each writing its float observation vector (float32), images, reward, flags and the
+numeric info into its row of the shared arrays, and answers with one byte on its answer pipe
+(plain ``os.write`` / ``os.read`` of a byte: no message framing, no pickling, no Python object per
+step). Only at an episode's start (its instruction, cabinet, target, room, seed), on a
 physics warning and on an error does the answer byte say that a pickled message waits on the
 worker's control connection. gymnasium's ``AsyncVectorEnv`` instead pickles every step's info dict
 and merges it key by key in the main process (about four times the main process's CPU per step).
@@ -19,9 +20,9 @@ Observations and the step's info arrays are fresh copies; the info's episode col
 instructions (``instruction="text"``) cannot live in shared memory: use the one-hot code, or
 ``vectorization_mode="async"``.
 
-``gym.make_vec(..., step_in_main=True)`` steps environment 0 in the main process while the workers
-step the others (see `OpenDVectorEnv`). `OpenDVectorEnv.worker_cpu_seconds` reports each worker's
-CPU time (for benchmarks).
+``gym.make_vec(..., step_in_main=True)`` steps the first ``envs_per_worker`` environments in the
+main process while the workers step the others (see `OpenDVectorEnv`).
+`OpenDVectorEnv.worker_cpu_seconds` reports each worker's CPU time (for benchmarks).
 """
 
 from __future__ import annotations
@@ -56,6 +57,22 @@ _STEP, _RESET, _CPU, _CLOSE = b"s", b"r", b"t", b"c"
 _DONE, _MESSAGE, _ERROR = b".", b"m", b"E"
 
 
+def env_groups(num_envs: int, envs_per_worker: int, step_in_main: bool) -> tuple[range | None, list[range]]:
+    """Which environments each process steps: (the main process's, or None; each worker's).
+    Consecutive groups of ``envs_per_worker`` environments, the main process's first (with
+    ``step_in_main``); the last group takes what is left when ``num_envs`` is not a multiple."""
+    if num_envs < 1:
+        raise ValueError(f"num_envs must be >= 1, not {num_envs}")
+    if isinstance(envs_per_worker, bool) or not isinstance(envs_per_worker, int) or envs_per_worker < 1:
+        raise ValueError(f"envs_per_worker must be an integer >= 1, not {envs_per_worker!r}")
+    groups = [range(start, min(start + envs_per_worker, num_envs)) for start in range(0, num_envs, envs_per_worker)]
+    return (groups[0], groups[1:]) if step_in_main else (None, groups)
+
+
+def _span(group: range) -> str:
+    return f"environment {group[0]}" if len(group) == 1 else f"environments {group[0]}-{group[-1]}"
+
+
 class _Shared:
     """Shared arrays, (num_envs, ...) each: ``multiprocessing`` raw arrays (handed to spawned
     workers as process arguments, freed with the last process that holds them) viewed as numpy."""
@@ -82,6 +99,7 @@ class _Runner:
         from opend_mj.sim.envs import OpenDCore, make_config
 
         self._seeding = seeding
+        self.index = index
         self.core = OpenDCore(make_config(**kwargs))
         self.rng, _ = seeding.np_random(None)
         self.done = True
@@ -133,11 +151,37 @@ class _Runner:
         self.core.close()
 
 
-def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
-    """One environment in a worker process: steps on a command byte, answers with one byte."""
+def _step_all(runners: list[_Runner]) -> bytes | None:
+    """Step each runner in turn; None when none has a message, else the pickled list of their
+    messages (None or bytes, one per runner)."""
+    messages = None
+    for k, runner in enumerate(runners):
+        try:
+            message = runner.step()
+        except Exception as error:
+            error.add_note(f"(in environment {runner.index})")
+            raise
+        if message is not None:
+            if messages is None:
+                messages = [None] * len(runners)
+            messages[k] = message
+    return None if messages is None else pickle.dumps(messages)
+
+
+def _reset(runner: _Runner, seed, options) -> bytes:
+    try:
+        return runner.reset(seed, options)
+    except Exception as error:
+        error.add_note(f"(in environment {runner.index})")
+        raise
+
+
+def _worker(indices: range, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
+    """Environments ``indices`` in a worker process: each command byte steps them all in turn, and
+    one answer byte says they are done."""
     shared = _Shared(specs, raw=raw)
     command_fd, answer_fd = commands.fileno(), answers.fileno()
-    runner = None
+    runners = []
 
     def answer(message: bytes | None = None) -> None:
         if message is None:
@@ -147,14 +191,20 @@ def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers,
             os.write(answer_fd, _MESSAGE)
 
     try:
-        runner = _Runner(index, kwargs, shared.arrays)
+        for index in indices:
+            try:
+                runners.append(_Runner(index, kwargs, shared.arrays))
+            except Exception as error:
+                error.add_note(f"(in environment {index})")
+                raise
         answer()  # ready
         while True:
             command = os.read(command_fd, 1)
             if command == _STEP:
-                answer(runner.step())
+                answer(_step_all(runners))
             elif command == _RESET:
-                answer(runner.reset(*pickle.loads(control.recv_bytes())))
+                resets = pickle.loads(control.recv_bytes())  # (seed, options) per environment
+                answer(pickle.dumps([_reset(r, *args) for r, args in zip(runners, resets)]))
             elif command == _CPU:
                 answer(pickle.dumps({"cpu_seconds": time.process_time()}))
             else:  # _CLOSE, or b"" when the main process is gone
@@ -166,7 +216,7 @@ def _worker(index: int, kwargs: dict, specs: dict, raw: dict, commands, answers,
         except (BrokenPipeError, OSError):
             pass
     finally:
-        if runner is not None:
+        for runner in runners:
             runner.close()
         shared.close()
         for connection in (commands, answers, control):
@@ -177,21 +227,25 @@ class OpenDVectorEnv(VectorEnv):
     """``num_envs`` environments over the dataset in worker processes with shared-memory results.
 
     Keyword arguments: those of ``gym.make("opend/OpenCabinet-v0", ...)`` (`EnvConfig`'s fields),
-    and ``step_in_main``: True runs environment 0 in this process, between handing the step to the
-    workers and collecting their answers (``num_envs - 1`` worker processes): the main process
-    steps an environment instead of sleeping, and waits for one fewer answer. Where there are no
-    more free cores than environments (e.g. 2 environments on 2 cores) this is the faster choice;
-    where a learner in the main process needs its core, leave it False.
+    and:
+
+    - ``envs_per_worker`` (K, default 1): each worker process steps K consecutive environments in
+      turn per hand-over (``ceil(num_envs / K)`` processes; the last takes what is left), so that
+      one command byte and one answer byte serve K steps.
+    - ``step_in_main``: True runs the first group (environments 0 to K - 1) in this process,
+      between handing the step to the workers and collecting their answers: the main process steps
+      environments instead of sleeping, and waits for one fewer answer. Where there are no more
+      free cores than processes (e.g. 2 processes on 2 cores) this is the faster choice; where a
+      learner in the main process needs its core, leave it False.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 2, step_in_main: bool = False, **kwargs):
+    def __init__(self, num_envs: int = 2, step_in_main: bool = False, envs_per_worker: int = 1, **kwargs):
         from opend_mj.sim.envs import OpenDCore, make_config
         from opend_mj.sim.spaces import action_space, observation_space
 
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, not {num_envs}")
+        local, groups = env_groups(int(num_envs), envs_per_worker, step_in_main)
         if kwargs.get("instruction", "onehot") == "text":
             raise ValueError("text instructions cannot be shared-memory observations: use instruction='onehot' "
                              "or gym.make_vec(..., vectorization_mode='async')")
@@ -230,16 +284,16 @@ class OpenDVectorEnv(VectorEnv):
         self._all.flags.writeable = False
         self._closed_workers = False
         self._controls, self._processes, self._command_fds, self._answer_fds, self._ends = [], [], [], [], []
-        self._local: _Runner | None = None
-        #: index of the first environment in a worker process (1 when environment 0 steps here)
-        self._offset = 1 if step_in_main else 0
+        self._local: list[_Runner] = []
+        #: the environments of this process (``step_in_main``) and of each worker
+        self._local_group, self._groups = local or range(0), groups
         try:
-            for i in range(self._offset, n):
+            for i, group in enumerate(groups):
                 command_r, command_w = context.Pipe(duplex=False)
                 answer_r, answer_w = context.Pipe(duplex=False)
                 control, child_control = context.Pipe()
                 proc = context.Process(target=_worker, name=f"opend-vector-{i}", daemon=True,
-                                       args=(i, dict(kwargs), specs, self._shared.raw, command_r, answer_w,
+                                       args=(group, dict(kwargs), specs, self._shared.raw, command_r, answer_w,
                                              child_control))
                 proc.start()
                 for child_end in (command_r, answer_w, child_control):
@@ -249,8 +303,8 @@ class OpenDVectorEnv(VectorEnv):
                 self._answer_fds.append(answer_r.fileno())
                 self._controls.append(control)
                 self._processes.append(proc)
-            if step_in_main:
-                self._local = _Runner(0, dict(kwargs), self._arrays)
+            for i in self._local_group:
+                self._local.append(_Runner(i, dict(kwargs), self._arrays))
             for j in range(len(self._processes)):
                 self._answer(j)
         except BaseException:
@@ -259,8 +313,7 @@ class OpenDVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ plumbing
     def _answer(self, j: int) -> bytes | None:
-        """Worker j's answer (environment ``j + offset``): None for a plain step, else its message
-        (raises on a worker's error)."""
+        """Worker j's answer: None for a plain step, else its message (raises on a worker's error)."""
         try:
             byte = os.read(self._answer_fds[j], 1)
         except OSError:
@@ -269,21 +322,27 @@ class OpenDVectorEnv(VectorEnv):
             return None
         if byte == _MESSAGE:
             return self._controls[j].recv_bytes()
-        where = f"worker {j} (environment {j + self._offset}) of the vector environment"
+        where = f"worker {j} ({_span(self._groups[j])}) of the vector environment"
         if byte == _ERROR:
             raise RuntimeError(f"{where} failed:\n{self._controls[j].recv_bytes().decode()}")
         raise RuntimeError(f"{where} died")
 
-    def _apply(self, i: int, message: bytes | None) -> list | None:
-        """Apply a worker's message (an episode start or physics warnings); return the warnings."""
+    def _apply(self, i: int, message: bytes | None, warnings: dict[int, list]) -> None:
+        """Apply environment i's message (an episode start or physics warnings, into ``warnings``)."""
         if message is None:
-            return None
+            return
         data = pickle.loads(message)
         if "physics_warnings" in data:
-            return data["physics_warnings"]
+            warnings[i] = data["physics_warnings"]
+            return
         self._episode[i] = data
         self._episode_columns = None
-        return None
+
+    def _apply_worker(self, j: int, answer: bytes | None, warnings: dict[int, list]) -> None:
+        """Apply worker j's answer: None, or the pickled list of its environments' messages."""
+        if answer is not None:
+            for i, message in zip(self._groups[j], pickle.loads(answer)):
+                self._apply(i, message, warnings)
 
     def _observations(self) -> dict:
         a = self._arrays
@@ -334,14 +393,14 @@ class OpenDVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
-        offset = self._offset
-        for j, s in enumerate(seeds[offset:]):
-            self._controls[j].send_bytes(pickle.dumps((s, options)))
+        for j, group in enumerate(self._groups):
+            self._controls[j].send_bytes(pickle.dumps([(seeds[i], options) for i in group]))
             os.write(self._command_fds[j], _RESET)
-        if self._local is not None:
-            self._apply(0, self._local.reset(seeds[0], options))
+        unused: dict[int, list] = {}
+        for i, runner in zip(self._local_group, self._local):
+            self._apply(i, runner.reset(seeds[i], options), unused)
         for j in range(len(self._processes)):
-            self._apply(j + offset, self._answer(j))
+            self._apply_worker(j, self._answer(j), unused)
         return self._observations(), self._infos({})
 
     def step(self, actions):
@@ -351,23 +410,17 @@ class OpenDVectorEnv(VectorEnv):
         target[...] = actions if actions.shape == target.shape else actions.reshape(target.shape)
         for fd in self._command_fds:
             os.write(fd, _STEP)
-        warnings = {}
-        if self._local is not None:  # environment 0 steps here while the workers step theirs
-            w = self._apply(0, self._local.step())
-            if w:
-                warnings[0] = w
+        warnings: dict[int, list] = {}
+        for i, runner in zip(self._local_group, self._local):  # stepped here while the workers step theirs
+            self._apply(i, runner.step(), warnings)
         for j in range(len(self._processes)):
-            message = self._answer(j)
-            if message is not None:
-                w = self._apply(j + self._offset, message)
-                if w:
-                    warnings[j + self._offset] = w
+            self._apply_worker(j, self._answer(j), warnings)
         return (self._observations(), a["reward"].copy(), a["terminated"].copy(), a["truncated"].copy(),
                 self._infos(warnings))
 
     def worker_cpu_seconds(self) -> list[float]:
         """CPU seconds (user + system) each worker process has used so far (not this process's:
-        with ``step_in_main`` environment 0's steps are in ``time.process_time()`` here)."""
+        with ``step_in_main`` the first group's steps are in ``time.process_time()`` here)."""
         for fd in self._command_fds:
             os.write(fd, _CPU)
         return [pickle.loads(self._answer(j))["cpu_seconds"] for j in range(len(self._processes))]
@@ -388,7 +441,7 @@ class OpenDVectorEnv(VectorEnv):
                 proc.terminate()
         for connection in self._ends + self._controls:
             connection.close()
-        if self._local is not None:
-            self._local.close()
-            self._local = None
+        for runner in self._local:
+            runner.close()
+        self._local = []
         self._shared.close()
