@@ -104,6 +104,12 @@ class HandPlannerConfig:
     rises faster than the bar and its own circle comes out too small: the hand then pitches ahead of
     the flap and twists the bar out of its pads.
 
+    ``yaw_rate`` (deg/s, or None: at once): during a door's pull the hand's yaw follows the pull
+    direction's turn at most this fast (:meth:`~opend_mj.policy.planner.pull.Pulling._yaw_rate_bounded`);
+    the direction itself changes at once. Where the hinge the pull turns about is replaced by the
+    one the camera sees turning, the direction turns by tens of degrees in one control step; a
+    gripper yawed as fast twists the bar out of its pads.
+
     ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
     segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
@@ -127,6 +133,7 @@ class HandPlannerConfig:
     hook_down_margin: float = 0.001
     press_depth: float = 0.0
     flap_min_radius_share: float | None = None
+    yaw_rate: float | None = None
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
@@ -166,7 +173,8 @@ class HandPlannerConfig:
                     raise ValueError(f"{path}: {key!r} must be a list of degrees in [0, 90], got {value!r}")
                 values[key] = tuple(float(v) for v in value)
                 continue
-            optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin", "flap_min_radius_share")
+            optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin", "flap_min_radius_share",
+                                "yaw_rate")
             if value is None and optional:
                 values[key] = None
                 continue
