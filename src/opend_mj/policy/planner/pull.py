@@ -183,11 +183,9 @@ class Pulling(FlapSteering, PanelSliding):
             return
         yaw = state.turned if run.yaw_turn is None else run.yaw_turn
         step = rate * dt
-        if abs(state.turned - yaw) > step:
-            yaw += math.copysign(step, state.turned - yaw)
+        if yaw != state.turned:  # (run.quat may still hold the last step's bounded yaw)
+            yaw = state.turned if abs(state.turned - yaw) <= step else yaw + math.copysign(step, state.turned - yaw)
             run.quat = self._yawed(state, yaw)
-        else:
-            yaw = state.turned
         run.yaw_turn = yaw
 
     def _follow_motion(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
