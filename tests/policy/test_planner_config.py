@@ -49,7 +49,8 @@ def test_grasp_profile_sets_finger_closing_and_depth():
                      hold_parts=1, grip_lost_change=None)),
     ("shadow", dict(low_handle_lift=0.03, min_grasp_height=None, pinch_gap=0.012, hold_parts=1)),
     ("skeleton", dict(low_handle_lift=0.0, min_grasp_height=0.05, pinch_gap=0.012, hold_parts=1)),
-    ("franka", dict(low_handle_pitch=35.0, pinch_gap=0.0, hold_parts=2, grip_lost_change=0.012)),
+    ("franka", dict(low_handle_pitch=35.0, pinch_gap=0.0, hold_parts=2, grip_lost_change=0.025, yaw_rate=30.0,
+                    flap_min_radius_share=1.0, clearance_pitches=(40.0, 45.0, 50.0))),
 ])
 def test_each_hand_carries_its_planner_numbers(hand, expected):
     from opend_mj.policy.planner import HandPlannerConfig

@@ -115,8 +115,11 @@ class FlapSteering:
 
     def _flap_radius(self, flap: Flap, state: PullState) -> float:
         """The flap's radius: the held path's circle through its start, tangent to the front there
-        (least squares), within ``flap_min_radius_share`` x the far edge's reach and the reach."""
+        (least squares), within ``flap_min_radius_share`` x the far edge's reach and the reach (the
+        hand's own share where its ``planner.json`` sets one)."""
         cfg = self.config.door
+        share = self.hand.flap_min_radius_share
+        share = cfg.flap_min_radius_share if share is None else share
         if len(state.track) < 2:
             return flap.reach
         track = np.asarray(state.track, float) - flap.start
@@ -126,7 +129,7 @@ class FlapSteering:
         if den < 1e-9:
             return flap.reach
         fit = float(((u * u + w * w) * w).sum()) / den
-        return float(np.clip(fit, cfg.flap_min_radius_share * flap.reach, flap.reach))
+        return float(np.clip(fit, share * flap.reach, flap.reach))
 
     def _steer_flap(self, site, run, state: PullState) -> None:
         """Pull along the flap's circle: the opening tangent at the site, the hand pitched by the

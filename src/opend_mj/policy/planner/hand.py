@@ -97,6 +97,19 @@ class HandPlannerConfig:
     (the grasp style "press_down"): the friction of that press, not a hook, pulls the bar out.
     Hooks are preferred over presses.
 
+    ``flap_min_radius_share`` (or None: ``DoorConfig.flap_min_radius_share``): the least radius of a
+    flap's circle, as a share of the distance from the handle to the front's far edge seen in depth
+    (:meth:`~opend_mj.policy.planner.flap.FlapSteering._flap_radius`). A gripper pitched at a low bar
+    holds it between two flat pads that let it roll along them as the flap lifts, so the held path
+    rises faster than the bar and its own circle comes out too small: the hand then pitches ahead of
+    the flap and twists the bar out of its pads.
+
+    ``yaw_rate`` (deg/s, or None: at once): during a door's pull the hand's yaw follows the pull
+    direction's turn at most this fast (:meth:`~opend_mj.policy.planner.pull.Pulling._yaw_rate_bounded`);
+    the direction itself changes at once. Where the hinge the pull turns about is replaced by the
+    one the camera sees turning, the direction turns by tens of degrees in one control step; a
+    gripper yawed as fast twists the bar out of its pads.
+
     ``hook_slide`` (m): a hooked door bar is grasped this far out along the fingers from the grasp site
     (the hand moves back along its finger axis), so that the bar lies at the fingers' middle
     segments and their curl closes behind it; at the site (the proximal segments) a thin bar close
@@ -119,6 +132,8 @@ class HandPlannerConfig:
     hook_down_depth: float = 0.005
     hook_down_margin: float = 0.001
     press_depth: float = 0.0
+    flap_min_radius_share: float | None = None
+    yaw_rate: float | None = None
 
     @classmethod
     def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
@@ -158,7 +173,8 @@ class HandPlannerConfig:
                     raise ValueError(f"{path}: {key!r} must be a list of degrees in [0, 90], got {value!r}")
                 values[key] = tuple(float(v) for v in value)
                 continue
-            optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin")
+            optional = key in ("min_grasp_height", "grip_lost_change", "clearance_margin", "flap_min_radius_share",
+                                "yaw_rate")
             if value is None and optional:
                 values[key] = None
                 continue

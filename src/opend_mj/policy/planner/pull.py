@@ -52,6 +52,7 @@ class PullRun:
     watch_kind: bool = True  # the kind is judged once per pull
     least_x: float = 0.0  # the site's smallest x so far (m)
     front_moved: bool = False  # a drawer's front was seen moving out during this pull
+    yaw_turn: float | None = None  # the turn (deg) the hand's yaw is at, where its rate is bounded
 
 
 class Pulling(FlapSteering, PanelSliding):
@@ -170,6 +171,22 @@ class Pulling(FlapSteering, PanelSliding):
                 state.turned = ang
                 state.opened = max(state.opened, abs(ang))
                 run.quat = self._yawed(state, ang)
+        self._yaw_rate_bounded(run, state, robot.control_dt)
+
+    def _yaw_rate_bounded(self, run: PullRun, state: PullState, dt: float) -> None:
+        """Turn the hand's yaw toward the pull direction's turn at most the hand's ``yaw_rate``
+        (deg/s; None: at once). The pull direction itself still changes at once: a hinge replaced
+        by the one the camera sees turns it by tens of degrees in one step, and a gripper whose
+        pads hold a bar, yawed as fast, twists the bar out of them."""
+        rate = self.hand.yaw_rate
+        if rate is None:
+            return
+        yaw = state.turned if run.yaw_turn is None else run.yaw_turn
+        step = rate * dt
+        if yaw != state.turned:  # (run.quat may still hold the last step's bounded yaw)
+            yaw = state.turned if abs(state.turned - yaw) <= step else yaw + math.copysign(step, state.turned - yaw)
+            run.quat = self._yawed(state, yaw)
+        run.yaw_turn = yaw
 
     def _follow_motion(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
         """Turn the pull direction toward the site's motion over the last ``direction_window``
