@@ -95,18 +95,15 @@ class HandReach:
     def __init__(self, task, physics, cap: float = 0.05):
         import mujoco
 
+        from opend_mj.sim.hands import touch_geoms
+
         self._distance = mujoco.mj_geomDistance
         self._m, self._d = physics.model.ptr, physics.data.ptr
         self.cap = float(cap)
         hand = task.hand
-        model = hand.mjcf_model
-        geoms = []
-        for name in hand.spec.touch_sensors:
-            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
-            if geom is not None:
-                geoms.append(int(physics.bind(geom).element_id))
+        geoms = list(touch_geoms(hand, physics))
         if not geoms:
-            geoms = [int(g) for g in physics.bind(model.find_all("geom")).element_id]
+            geoms = [int(g) for g in physics.bind(hand.mjcf_model.find_all("geom")).element_id]
         self._hand = sorted(set(geoms))
         self._handle = [mujoco.mj_name2id(self._m, mujoco.mjtObj.mjOBJ_GEOM, f"cabinet/{g}")
                         for g in task.target.handle_geoms]

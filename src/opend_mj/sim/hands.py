@@ -360,6 +360,18 @@ def touch_parts(spec: HandSpec) -> tuple[str, ...]:
     return tuple(sorted(set(spec.touch_sensors.values()))) + ("other",)
 
 
+def touch_geoms(hand: Hand, physics) -> dict[int, str]:
+    """The geoms that carry the hand's touch sensors (``touch_<geom>`` in ``spec.touch_sensors``):
+    geom id in ``physics``'s model -> the part it belongs to (palm, thumb, a finger)."""
+    model = hand.mjcf_model
+    geoms: dict[int, str] = {}
+    for name, part in hand.spec.touch_sensors.items():
+        geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
+        if geom is not None:
+            geoms[int(physics.bind(geom).element_id)] = part
+    return geoms
+
+
 class HandTouch:
     """What the hand feels: the normal force (N) on each of its parts from things that are not the
     hand (a thumb pressing on a finger is not touch). Part of the hand's own state, as its touch
@@ -373,11 +385,7 @@ class HandTouch:
         self.parts = touch_parts(hand.spec)
         self._index = {p: i for i, p in enumerate(self.parts)}
         self._m, self._d = physics.model.ptr, physics.data.ptr
-        self._geom_part: dict[int, int] = {}
-        for name, part in hand.spec.touch_sensors.items():
-            geom = model.find("geom", name[len("touch_"):]) if name.startswith("touch_") else None
-            if geom is not None:
-                self._geom_part[int(physics.bind(geom).element_id)] = self._index[part]
+        self._geom_part = {geom: self._index[part] for geom, part in touch_geoms(hand, physics).items()}
         hand_bodies = {int(b) for b in physics.bind(model.find_all("body")).element_id}
         self._hand_geom = np.isin(self._m.geom_bodyid, list(hand_bodies))
         self._force6 = np.zeros(6)
