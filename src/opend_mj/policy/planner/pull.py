@@ -321,16 +321,14 @@ class Pulling(FlapSteering, PanelSliding):
         seen = self.state.hinge
         if not cfg.hinge_pull or seen is None or state.sense != 0.0:
             return
-        r = site[:2] - np.asarray(seen, float)
+        hinge = np.asarray(seen, float)
+        r = site[:2] - hinge
         radius = float(np.linalg.norm(r))
         if not (cfg.hinge_radius_range[0] <= radius <= cfg.hinge_radius_range[1]):
             return
-        t = np.array([-r[1], r[0]]) / radius
-        if abs(t[0]) < 0.5:  # the handle is not beside its hinge in the door's plane (> 60 deg off)
+        if abs(r[1]) / radius < 0.5:  # the handle is not beside its hinge in the door's plane (> 60 deg off)
             return
-        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
-        state.hinge = np.asarray(seen, float)
-        state.angle0 = math.atan2(r[1], r[0])
+        self._turn_about(state, hinge, r)
         result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
 
     def _hinge_looked(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
@@ -341,12 +339,12 @@ class Pulling(FlapSteering, PanelSliding):
         hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
         side that came out. A front seen farther out at the handle than the hand that pulls it came
         (by more than ``hinge_look_slack``, m; the front's shift at the handle's column times the
-        cosine of its angle is the handle's own) is another part's. Where that line is more than ``RecoveryConfig.hinge_agreement`` (m) from
-        the hinge seen in the first image (a front plane that runs on past the door's own edge, a
-        hinge inferred on the wrong side), and the handle is ``seen_hinge_radius`` (m) from it, the
-        pull turns about the seen line instead (the hand's yaw too). A hand that slides along a
-        horizontal bar moves where it is pulled, so its path cannot tell a wrong hinge; the
-        camera can."""
+        cosine of its angle is the handle's own) is another part's. Where that line is more than
+        ``RecoveryConfig.hinge_agreement`` (m) from the hinge seen in the first image (a front plane
+        that runs on past the door's own edge, a hinge inferred on the wrong side), and the handle is
+        ``seen_hinge_radius`` (m) from it, the pull turns about the seen line instead (the hand's yaw
+        too). A hand that slides along a horizontal bar moves where it is pulled, so its path cannot
+        tell a wrong hinge; the camera can."""
         cfg = self.config.door
         looks = cfg.hinge_look_distances
         if state.hinge_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.hinge_looked]:
@@ -369,12 +367,17 @@ class Pulling(FlapSteering, PanelSliding):
         lo, hi = cfg.seen_hinge_radius
         if off <= self.config.recovery.hinge_agreement or not lo <= radius <= hi:
             return
-        t = np.array([-r[1], r[0]]) / radius
         result.events.append({"hinge_seen_turning": {"hinge": [round(float(v), 3) for v in seen],
                                                      "was": [round(float(v), 3) for v in state.hinge],
                                                      "radius": round(radius, 3), "across": front["across"]}})
-        state.hinge = seen
-        state.sense = -1.0 if t[0] > 0 else 1.0  # the tangent that leaves the cabinet (-x)
+        self._turn_about(state, seen, r)
+
+    @staticmethod
+    def _turn_about(state: PullState, hinge: np.ndarray, r: np.ndarray) -> None:
+        """Pull along the circle about ``hinge`` (x, y; m) through the point ``hinge + r``: the sense
+        whose tangent there leaves the cabinet (-x) and the angle (rad) the circle starts at."""
+        state.hinge = hinge
+        state.sense = -1.0 if r[1] < 0 else 1.0  # the tangent (-r_y, r_x) / |r| that leaves the cabinet (-x)
         state.angle0 = math.atan2(r[1], r[0])
 
     def _hinge_tangent(self, state: PullState, site: np.ndarray) -> tuple[np.ndarray, float]:
