@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +27,6 @@ from opend_mj.transforms import axis_angle_quat, quat_axis_z
 
 from .test_narrow_door_pull import PANEL_X, PROUD, SeenDoor, _view
 
-SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
 
 
 class PadDoor(SeenDoor):
@@ -134,20 +132,7 @@ def test_a_wrong_number_is_refused_naming_the_file(tmp_path, key, value):
     ("45600", "joint_1"),  # a bar 4.5 cm above the floor: hooked pitched 40 degrees
     ("46166", "joint_1"),  # a flap hinged at its top, its bar 8 cm above the floor: the flap's reach
 ])
-def test_real_franka_doors_open(cid, joint):
+def test_real_franka_doors_open(real_episode, cid, joint):
     """The Franka on three real doors it lost before (open 0-2 %) opens each beyond 20 %."""
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.evaluation.episode import EpisodeJob
-    from opend_mj.evaluation.runner import run_episode
-
-    if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
-        pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        compile_cabinet(SHARED_TRAIN / cid, tmp / "built", cache_dir=tmp / "cache")
-        rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp / "built" / cid), joint=joint,
-                                     split="all", hand="franka", solver="oracle"))
-    assert "error" not in rec, rec.get("error")
+    rec = real_episode(cid, joint, "franka")
     assert rec["success"] and rec["open_ratio"] > 0.2, rec

@@ -6,12 +6,9 @@ Synthetic scenes for the choice; real PartNet-Mobility doors (../shared) end to 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
 #: a door whose 7 mm bar stands 2-5 cm above the floor with 27 mm behind it (measured in depth)
 LOW_BAR_DOOR = ("45403", "joint_1")
 #: a door whose bar stands 3-5 cm above the floor with too little behind it for the closed fingers
@@ -67,18 +64,8 @@ def test_hook_down_pitches_are_checked_when_the_hand_file_is_read(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("target", "style"), [(LOW_BAR_DOOR, "hook_down"), (PRESSED_BAR_DOOR, "press_down")])
-def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(tmp_path, target, style):
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.evaluation.episode import EpisodeJob
-    from opend_mj.evaluation.runner import run_episode
-
-    cid, joint = target
-    if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
-        pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
-    compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
-    rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp_path / "built" / cid), joint=joint,
-                                 split="all", hand="franka", solver="oracle"))
-    assert "error" not in rec, rec.get("error")
+def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(real_episode, target, style):
+    rec = real_episode(*target, "franka")
     assert rec["grasp_style"] == style
     assert rec["success"] and rec["range_ratio"] > 0.75, rec
     assert rec["others_moved"] == []

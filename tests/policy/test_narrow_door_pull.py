@@ -15,7 +15,6 @@ end to end.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,7 +28,6 @@ DT = 1.0 / 60.0  # the task's control step (s)
 PANEL_X = 1.0  # the closed door's front (m)
 HANDLE_Z = 0.5  # the handle's height and the camera's (m)
 PROUD = 0.035  # the handle's centre in front of the door's front (m)
-SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
 #: a door 20 cm wide whose horizontal bar is 12 cm from its hinge; the hinge is seen in the first image
 #: 71 cm away on the other side of the handle (the front plane runs on over the next door)
 NARROW_DOOR = ("45271", "joint_4")
@@ -207,22 +205,8 @@ def test_a_hinge_the_camera_agrees_with_is_kept():
 
 
 @pytest.mark.slow
-def test_a_real_narrow_door_with_its_hinge_seen_on_the_wrong_side_opens():
+def test_a_real_narrow_door_with_its_hinge_seen_on_the_wrong_side_opens(real_episode):
     """The Allegro on a real 20 cm door whose horizontal bar is 12 cm from its hinge (the first image's
     hinge 71 cm away on the other side): the camera corrects the hinge and the door opens."""
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.evaluation.episode import EpisodeJob
-    from opend_mj.evaluation.runner import run_episode
-
-    cid, joint = NARROW_DOOR
-    if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
-        pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        compile_cabinet(SHARED_TRAIN / cid, tmp / "built", cache_dir=tmp / "cache")
-        rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp / "built" / cid), joint=joint,
-                                     split="all", hand="allegro", solver="oracle"))
-    assert "error" not in rec, rec.get("error")
+    rec = real_episode(*NARROW_DOOR, "allegro")
     assert rec["success"] and rec["open_ratio"] > 0.4, rec

@@ -6,12 +6,9 @@ end to end."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-SHARED_TRAIN = Path(__file__).resolve().parents[2].parent / "shared" / "opend-train"
 #: a "drawer" whose front slides sideways: a vertical bar 17 mm thick with 37 mm behind it
 SLIDING_PANEL = ("45855", "joint_0")
 
@@ -91,18 +88,8 @@ def test_the_gripper_is_never_turned_for_a_slide(grasp_scenes):
 
 
 @pytest.mark.slow
-def test_a_real_sliding_panel_opens_with_the_allegro(tmp_path):
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.evaluation.episode import EpisodeJob
-    from opend_mj.evaluation.runner import run_episode
-
-    cid, joint = SLIDING_PANEL
-    if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
-        pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
-    compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
-    rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp_path / "built" / cid), joint=joint,
-                                 split="all", hand="allegro", solver="oracle"))
-    assert "error" not in rec, rec.get("error")
+def test_a_real_sliding_panel_opens_with_the_allegro(real_episode):
+    rec = real_episode(*SLIDING_PANEL, "allegro")
     assert rec["pull_end"][0] == "stuck"  # pulled out first, it did not come
     assert rec["success"] and rec["range_ratio"] > 0.75, rec
     assert rec["others_moved"] == []
