@@ -12,17 +12,6 @@ from opend_mj.evaluation.pool import run_jobs
 from opend_mj.evaluation.results import load_results, ResultsWriter
 
 
-@pytest.fixture(scope="module")
-def drawer_cabinet(tmp_path_factory) -> Path:
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.assets.procedural import generate_source
-
-    root = tmp_path_factory.mktemp("eval_cabinets")
-    src = generate_source(4, 0, root / "src")  # proc_0004: a drawer stack
-    compile_cabinet(src, root / "built", cache_dir=root / "cache")
-    return root / "built" / "proc_0004"
-
-
 def _jobs(cab: Path, joints, seed=0, **kw):
     return [EpisodeJob(cabinet=cab.name, cabinet_dir=str(cab), joint=j, split="train", hand="franka",
                        solver="oracle", seed=seed, use_grasp_file=False, **kw) for j in joints]

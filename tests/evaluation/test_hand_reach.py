@@ -12,17 +12,6 @@ from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.grading import failure_stage
 
 
-@pytest.fixture(scope="module")
-def drawer_cabinet(tmp_path_factory) -> Path:
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.assets.procedural import generate_source
-
-    root = tmp_path_factory.mktemp("reach_cabinets")
-    src = generate_source(4, 0, root / "src")  # proc_0004: a drawer stack
-    compile_cabinet(src, root / "built", cache_dir=root / "cache")
-    return root / "built" / "proc_0004"
-
-
 def _job(cab: Path, hand: str) -> EpisodeJob:
     joint = json.loads((cab / "cabinet.json").read_text())["targets"][0]["joint"]
     return EpisodeJob(cabinet=cab.name, cabinet_dir=str(cab), joint=joint, split="train", hand=hand,

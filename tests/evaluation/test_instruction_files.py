@@ -75,17 +75,6 @@ def test_a_target_without_a_phrasing_is_an_error(tmp_path):
         assign_phrasings([_job("c1", "j0", "door"), _job("c2", "j0", "top drawer")], load_instruction_file(path))
 
 
-@pytest.fixture(scope="module")
-def drawer_cabinet(tmp_path_factory) -> Path:
-    from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.assets.procedural import generate_source
-
-    root = tmp_path_factory.mktemp("language_cabinets")
-    src = generate_source(4, 0, root / "src")  # proc_0004: a drawer stack
-    compile_cabinet(src, root / "built", cache_dir=root / "cache")
-    return root / "built" / "proc_0004"
-
-
 def test_refused_and_reworded_episodes(drawer_cabinet):
     """A phrasing the parser reads as the template gives the template's episode (same motion and
     outcome); a refused one fails at stage "language" with the hand never moving the cabinet."""
