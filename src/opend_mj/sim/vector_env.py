@@ -27,6 +27,7 @@ main process while the workers step the others (see `OpenDVectorEnv`).
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import pickle
@@ -151,16 +152,23 @@ class _Runner:
         self.core.close()
 
 
+@contextlib.contextmanager
+def _in_environment(index: int):
+    """An error raised inside names the environment it came from (a note on the exception)."""
+    try:
+        yield
+    except Exception as error:
+        error.add_note(f"(in environment {index})")
+        raise
+
+
 def _step_all(runners: list[_Runner]) -> bytes | None:
     """Step each runner in turn; None when none has a message, else the pickled list of their
     messages (None or bytes, one per runner)."""
     messages = None
     for k, runner in enumerate(runners):
-        try:
+        with _in_environment(runner.index):
             message = runner.step()
-        except Exception as error:
-            error.add_note(f"(in environment {runner.index})")
-            raise
         if message is not None:
             if messages is None:
                 messages = [None] * len(runners)
@@ -169,11 +177,8 @@ def _step_all(runners: list[_Runner]) -> bytes | None:
 
 
 def _reset(runner: _Runner, seed, options) -> bytes:
-    try:
+    with _in_environment(runner.index):
         return runner.reset(seed, options)
-    except Exception as error:
-        error.add_note(f"(in environment {runner.index})")
-        raise
 
 
 def _worker(indices: range, kwargs: dict, specs: dict, raw: dict, commands, answers, control) -> None:
@@ -192,11 +197,8 @@ def _worker(indices: range, kwargs: dict, specs: dict, raw: dict, commands, answ
 
     try:
         for index in indices:
-            try:
+            with _in_environment(index):
                 runners.append(_Runner(index, kwargs, shared.arrays))
-            except Exception as error:
-                error.add_note(f"(in environment {index})")
-                raise
         answer()  # ready
         while True:
             command = os.read(command_fd, 1)
