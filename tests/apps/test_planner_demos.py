@@ -133,7 +133,8 @@ def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path
 def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, small_dataset, tmp_path):
     """Checkpoints of two seeds run as one agent (``checkpoint=a.pt,b.pt``), which averages the two
     models' chunks; `opend bundle-policy` writes the same ensemble as one file (same episode, same
-    record), with its ensemble_decay as the default; members that predict different chunks are refused."""
+    record), with its ensemble_decay as the default; members that predict different chunks are refused.
+    A bundle's routes (and the agent's drawer= / door= checkpoints) give a target kind its own members."""
     import torch
 
     from opend_mj.evaluation.results import load_results
@@ -190,10 +191,10 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     obs = {k: np.asarray(demo.obs[k][0]) for k in STEP_KEYS}
     episode = SimpleNamespace(hand="franka", instruction=instruction, time_limit=15.0, camera_view=None)
 
-    def first_action(checkpoint):
-        agent = BCAgent(checkpoint=checkpoint)
-        agent.reset(episode)
-        ctx = torch.from_numpy(context_features(feats, instruction))[None]
+    def first_action(checkpoint, text=instruction, **kinds):
+        agent = BCAgent(checkpoint=checkpoint, **kinds)
+        agent.reset(SimpleNamespace(**{**vars(episode), "instruction": text}))
+        ctx = torch.from_numpy(context_features(feats, text))[None]
         agent._centre, agent._ctx = feats[:3], [ctx] * len(agent.models)
         return agent.act(obs), agent
 
@@ -205,6 +206,27 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     np.testing.assert_allclose(action, decode_action(mean[0], feats[:3], agent._low, agent._high), atol=1e-6)
     single, _ = first_action(str(ckpts["s0"]))
     assert not np.allclose(single, action)
+
+    # a bundle's routes give a target kind its own members, chosen by the kind the instruction names
+    routed = tmp_path / "routed.pt"
+    result = CliRunner().invoke(main, ["bundle-policy", str(ckpts["s0"]), str(ckpts["s1"]), "--out", str(routed),
+                                       "--route", "drawer=1"])
+    assert result.exit_code == 0 and "drawer: members [1]" in result.output, result.output
+    assert len(load_policies([routed], kind="drawer")) == 1 and len(load_policies([routed], kind="door")) == 2
+    drawer_action, agent = first_action(str(routed), "drawer")
+    assert len(agent.models) == 1
+    np.testing.assert_allclose(drawer_action, first_action(str(ckpts["s1"]), "drawer")[0], atol=1e-6)
+    door_action, agent = first_action(str(routed), "top left door")
+    assert len(agent.models) == 2
+    np.testing.assert_allclose(door_action, first_action(pair, "top left door")[0], atol=1e-6)
+    # a kind's own checkpoints given to the agent (drawer= / door=) replace checkpoint= for that kind
+    assert len(first_action(pair, "drawer", drawer=str(ckpts["s1"]))[1].models) == 1
+    assert len(first_action(pair, "top left door", drawer=str(ckpts["s1"]))[1].models) == 2
+    for bad, words in (("kitchen=0", "kind"), ("door=2", "0..1"), ("door", "KIND=I,J"), ("door=a", "whole numbers")):
+        wrong = CliRunner().invoke(main, ["bundle-policy", str(ckpts["s0"]), str(ckpts["s1"]), "--out",
+                                          str(tmp_path / "bad.pt"), "--route", bad])
+        assert wrong.exit_code != 0 and words in wrong.output, (bad, wrong.output)
+    assert not (tmp_path / "bad.pt").exists()
 
 
 def test_dart_noise_labels_are_the_planners_clean_actions(small_dataset, tmp_path):

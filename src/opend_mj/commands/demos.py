@@ -108,13 +108,27 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
               help="The bundle (one file; `opend run --policy bc --policy-arg checkpoint=OUT` or checkpoints/bc_<hand>.pt).")
 @click.option("--ensemble-decay", type=float, default=None,
               help="The temporal ensemble's weight decay that the bundle uses by default [each member's own].")
-def bundle_policy(checkpoints, out, ensemble_decay):
+@click.option("--route", "routes", multiple=True, metavar="KIND=I,J",
+              help="Members (0-based, over the CHECKPOINTS' members in order) that act on targets of KIND "
+                   "(drawer or door; repeatable) [all members].")
+def bundle_policy(checkpoints, out, ensemble_decay, routes):
     """Bundle behaviour-cloning checkpoints (e.g. trained with different --seed) into one seed ensemble."""
     from opend_mj.policy.learned.bc import bundle_policies
 
     try:
-        summary = bundle_policies(list(checkpoints), out, ensemble_decay=ensemble_decay)
+        routed = {}
+        for text in routes:
+            kind, sep, ids = text.partition("=")
+            if not sep or not ids.strip():
+                raise ValueError(f"--route {text!r}: write KIND=I,J (e.g. drawer=0,2)")
+            try:
+                routed[kind.strip()] = [int(i) for i in ids.split(",")]
+            except ValueError:
+                raise ValueError(f"--route {text!r}: member indices are whole numbers separated by commas") from None
+        summary = bundle_policies(list(checkpoints), out, ensemble_decay=ensemble_decay, routes=routed)
     except (ValueError, KeyError) as exc:
         raise click.ClickException(str(exc)) from exc
     click.echo(f"{summary['members']} members (seeds {summary['seeds']}), ensemble_decay "
                f"{summary['ensemble_decay']:g}, stop {summary['stop_time']:.2f} s -> {out}")
+    for kind, route in summary.get("routes", {}).items():
+        click.echo(f"  {kind}: members {route['members']}, stop {route['stop_time']:.2f} s")

@@ -9,7 +9,9 @@ handle, the instruction and the hand's own state (`policy.learned.bc`) and predi
 checkpoints (``checkpoint=a.pt,b.pt,c.pt``, or one bundle file of `opend bundle-policy`) form a seed
 ensemble: every step, each model predicts its chunk from the same inputs and the agent averages
 them before the temporal blend (models trained from different seeds err differently; their mean
-errs less). The agent stops
+errs less). A target kind may have its own members: ``drawer=`` / ``door=`` checkpoints, or a
+bundle's routes (`opend bundle-policy --route`), chosen by the kind the instruction names (the
+instruction is the agent's input; `language.target_kind`). The agent stops
 (returns None) where the solver finds no handle, and at ``stop_time`` (default: the checkpoint's,
 the time by which 95 % of its training demonstrations had ended, holding the opened part; the
 protocol's 15 s limit applies in any case).
@@ -45,15 +47,16 @@ class BCAgent:
     ``threads``: torch CPU threads (1 keeps parallel episodes from competing); ``stop_time``: s of
     simulated time after which the agent stops (default: the checkpoint's ``stop_time``);
     ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
-    values weight the newest predictions most). Over several checkpoints, the defaults of
-    ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
+    values weight the newest predictions most); ``drawer`` / ``door``: the checkpoints (same
+    form as ``checkpoint``) that act on that kind of target instead. Over several checkpoints, the
+    defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
 
     control = "absolute"
     images = "first"
 
     def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
                  name: str | None = None, stop_time: float | None = None, ensemble_decay: float | None = None,
-                 **solver_options):
+                 drawer: str | None = None, door: str | None = None, **solver_options):
         from opend_mj.policy.solvers import needs_ground_truth, solver_factory
 
         if needs_ground_truth(solver):
@@ -62,6 +65,7 @@ class BCAgent:
         self._factory = lambda: solver_factory(solver)(**solver_options)
         self._solver = None
         self.checkpoint = checkpoint
+        self.kind_checkpoints = {"drawer": drawer, "door": door}
         self.threads = int(threads)
         self.stop_time = stop_time
         self.ensemble_decay = ensemble_decay
@@ -77,9 +81,16 @@ class BCAgent:
     def reset(self, episode) -> None:
         import torch
 
+        from opend_mj.language import InstructionNotUnderstood, target_kind
+
         torch.set_num_threads(self.threads)
-        paths = checkpoint_paths(self.checkpoint) if self.checkpoint else [default_checkpoint(episode.hand)]
-        members = load_policies(paths)
+        try:
+            kind = target_kind(episode.instruction)
+        except InstructionNotUnderstood:
+            kind = None  # every member acts
+        spec = self.kind_checkpoints.get(kind) or self.checkpoint
+        paths = checkpoint_paths(spec) if spec else [default_checkpoint(episode.hand)]
+        members = load_policies(paths, kind=kind)
         self.models = [m for m, _, _ in members]
         _, self.config, ckpt = members[0]
         if ckpt.get("hand") not in (None, episode.hand):

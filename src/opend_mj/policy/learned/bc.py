@@ -292,9 +292,10 @@ def checkpoint_paths(spec) -> list:
     return [Path(s) for s in parts]
 
 
-def load_policies(paths, device: str = "cpu") -> list:
+def load_policies(paths, device: str = "cpu", kind: str | None = None) -> list:
     """``[(model, BCConfig, checkpoint dict), ...]`` of the files ``paths``, each a checkpoint of
-    `opend train-policy` or an ensemble bundle (:func:`bundle_policies`, every member listed); the
+    `opend train-policy` or an ensemble bundle (:func:`bundle_policies`, every member listed, or
+    for a target ``kind`` ("drawer" or "door") the members the bundle routes that kind to); the
     members must agree on the hand, the step and action sizes, the finger ranges, the chunk and
     the lags (an error names the file that does not)."""
     from pathlib import Path
@@ -311,7 +312,8 @@ def load_policies(paths, device: str = "cpu") -> list:
             key = ("ensemble", str(path.resolve()), device)
             if key not in _BUNDLES:
                 _BUNDLES[key] = [_member(m, device) for m in head["members"]]
-            members += [(m, c, k, path) for m, c, k in _BUNDLES[key]]
+            chosen = (head.get("routes") or {}).get(kind, range(len(head["members"])))
+            members += [(*_BUNDLES[key][i], path) for i in chosen]
         else:
             members.append((*load_policy(path, device=device), path))
     first_model, first_config, first, first_path = members[0]
@@ -342,11 +344,17 @@ def _member(ckpt: dict, device: str):
     return model.eval().to(device), config, ckpt
 
 
-def bundle_policies(paths, out, ensemble_decay: float | None = None) -> dict:
+#: Target kinds a bundle may route to its own members (the instruction names one: `language.target_kind`).
+ROUTE_KINDS = ("drawer", "door")
+
+
+def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dict | None = None) -> dict:
     """Write the checkpoints ``paths`` (checked as :func:`load_policies` checks them) into one file
     ``out`` that `opend run --policy bc` loads as their ensemble; ``ensemble_decay`` (the temporal
-    ensemble's weight decay per step of age) becomes every member's default where given. Returns
-    the bundle's summary."""
+    ensemble's weight decay per step of age) becomes every member's default where given.
+    ``routes`` ({"drawer": [0, 2], ...}: indices into the bundle's members, counted over ``paths``
+    in order) gives a target kind its own members; a kind not routed uses all of them. Returns the
+    bundle's summary."""
     from pathlib import Path
 
     import torch
@@ -358,18 +366,32 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None) -> dict:
         members += ckpt["members"] if ckpt.get("format") == ENSEMBLE_FORMAT else [ckpt]
     if ensemble_decay is not None:
         members = [{**m, "config": {**m["config"], "ensemble_decay": float(ensemble_decay)}} for m in members]
+    routes = {str(k): [int(i) for i in v] for k, v in (routes or {}).items()}
+    for kind, ids in routes.items():
+        if kind not in ROUTE_KINDS:
+            raise ValueError(f"route {kind!r}: a target kind is one of {', '.join(ROUTE_KINDS)}")
+        if not ids or any(not 0 <= i < len(members) for i in ids):
+            raise ValueError(f"route {kind}={ids}: member indices must be 0..{len(members) - 1} "
+                             f"(the bundle has {len(members)} members), at least one")
+
+    def stop_of(ids):
+        return float(np.mean([members[i].get("stop_time", members[i].get("max_time", 0.0)) for i in ids]))
+
     first = members[0]
     summary = {"members": len(members), "sources": [str(p) for p in paths], "hand": first["hand"],
                "seeds": [m["config"].get("seed") for m in members],
                "ensemble_decay": float(np.mean([m["config"].get("ensemble_decay", 0.01) for m in members])),
-               "stop_time": float(np.mean([m.get("stop_time", m.get("max_time", 0.0)) for m in members]))}
-    bundle = {"format": ENSEMBLE_FORMAT, "members": members, "hand": first["hand"], "summary": summary}
+               "stop_time": stop_of(range(len(members)))}
+    if routes:
+        summary["routes"] = {k: {"members": v, "stop_time": stop_of(v)} for k, v in routes.items()}
+    bundle = {"format": ENSEMBLE_FORMAT, "members": members, "hand": first["hand"], "summary": summary,
+              "routes": routes}
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.save(bundle, out)
     return summary
 
 
-__all__ = ["BCConfig", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
+__all__ = ["BCConfig", "ENSEMBLE_FORMAT", "ROUTE_KINDS", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
            "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
            "percept_vector", "quat_from_rot6", "rot6", "step_features"]
