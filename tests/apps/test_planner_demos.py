@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -283,3 +284,23 @@ def _first_job(cabinets):
     from opend_mj.apps.planner_demos import demo_jobs
 
     return demo_jobs(cabinets, ["franka"], split="all", limit=1)[0]
+
+
+def test_training_demos_of_one_kind(demos_file):
+    """`opend train-policy --kind` reads only the demos whose instruction names that kind of target
+    (the members a bundle routes a kind to); both kinds together are every demo."""
+    from opend_mj.apps.planner_demos import load_training_demos
+    from opend_mj.language import target_kind
+
+    out, _ = demos_file
+    every = load_training_demos(out)
+    by_kind = {k: load_training_demos(out, kind=k) for k in ("drawer", "door")}
+    assert sum(map(len, by_kind.values())) == len(every) == 2
+    for kind, demos in by_kind.items():
+        assert all(target_kind(d.attrs["instruction"]) == kind for d in demos)
+    # the small dataset's first two targets are doors: no drawer to train on is a clear error, no checkpoint
+    assert [len(by_kind["drawer"]), len(by_kind["door"])] == [0, 2]
+    result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--kind", "drawer",
+                                       "--out", "never.pt", "--steps", "1", "--no-progress"])
+    assert result.exit_code != 0 and "no usable demonstrations" in result.output
+    assert not Path("never.pt").exists()

@@ -350,10 +350,17 @@ TRAINING_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat",
                  "time", "handle_features")
 
 
-def load_training_demos(paths, max_demos: int | None = None, successes_only: bool = True) -> list[Demo]:
+def load_training_demos(paths, max_demos: int | None = None, successes_only: bool = True,
+                        kind: str | None = None) -> list[Demo]:
     """The demos of one or more files with only the keys training reads (float32 where they are float),
-    in file order, at most ``max_demos`` of them (counting the kept ones only)."""
+    in file order, at most ``max_demos`` of them (counting the kept ones only); with ``kind``
+    ("drawer" or "door") only those whose instruction names that kind of target."""
     from opend_mj.apps.demos import _h5_value, _h5py, _is_hdf5
+    from opend_mj.language import target_kind
+
+    def wanted(attrs) -> bool:
+        return (attrs.get("success") or not successes_only) and (
+            kind is None or target_kind(str(attrs.get("instruction", ""))) == kind)
 
     out: list[Demo] = []
     for path in [paths] if isinstance(paths, (str, Path)) else paths:
@@ -362,7 +369,7 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
             raise FileNotFoundError(f"{path}: no demonstrations file; record one with `opend demos --out {path}`")
         if not _is_hdf5(path):
             _, demos = read_demos(path)
-            out += [d for d in demos if d.attrs.get("success") or not successes_only]
+            out += [d for d in demos if wanted(d.attrs)]
             continue
         with _h5py().File(path, "r") as f:
             if "data" not in f:
@@ -371,7 +378,7 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
             for name in sorted((k for k in g if k.startswith("demo_")), key=lambda k: int(k.split("_")[1])):
                 d = g[name]
                 attrs = {k: _h5_value(v) for k, v in d.attrs.items()}
-                if successes_only and not attrs.get("success"):
+                if not wanted(attrs):
                     continue
                 missing = [k for k in TRAINING_KEYS if k not in d["obs"]]
                 if missing:

@@ -72,11 +72,14 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--lr", type=float, default=None, help="[1e-3]")
 @click.option("--chunk", type=click.IntRange(min=1), default=None, help="Actions per prediction [20].")
 @click.option("--d-model", type=click.IntRange(min=8), default=None, help="Transformer width [64].")
+@click.option("--kind", type=click.Choice(["drawer", "door"]), default=None,
+              help="Train on the demos of this kind of target only (a member that a bundle routes that kind "
+                   "to: `opend bundle-policy --route`) [both].")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
 @click.option("--device", default="cpu", show_default=True)
 @click.option("--progress/--no-progress", default=True)
-def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, seed, threads, device,
+def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, kind, seed, threads, device,
                  progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
@@ -90,11 +93,12 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     config = dataclasses.replace(BCConfig(seed=seed), **changes)
     out = out or Path("checkpoints") / f"bc_{hand}.pt"
     try:
-        demos_list = load_training_demos(list(demo_files), max_demos=max_demos)
+        demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind)
         wrong = {d.attrs.get("hand") for d in demos_list} - {hand}
         if wrong:
             raise ValueError(f"the demos are of the {', '.join(sorted(map(str, wrong)))} hand, not {hand}")
-        summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device)
+        summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device,
+                           kind=kind)
     except (ValueError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from exc
     last = summary["history"][-1] if summary["history"] else {}

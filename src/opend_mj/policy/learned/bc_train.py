@@ -104,8 +104,10 @@ def split_demos(data: DemoArrays, val_fraction: float, seed: int) -> tuple[np.nd
 
 
 def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None = None, val_fraction: float = 0.1,
-             progress: bool = True, threads: int | None = None, device: str = "cpu", log=None) -> dict:
+             progress: bool = True, threads: int | None = None, device: str = "cpu", log=None,
+             kind: str | None = None) -> dict:
     """Train on ``demos`` (of ``hand``); write the checkpoint to ``out`` (with a ``.json`` summary beside it).
+    ``kind`` ("drawer", "door") is recorded in the summary where the demos were of one kind only.
 
     Returns the summary: data sizes, losses, seconds, parameter count."""
     import torch
@@ -182,7 +184,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     bar.close()
     seconds = time.perf_counter() - t0
     summary = {
-        "hand": hand, "config": config.to_dict(), "demos": int(data.n_demos), "train_demos": int(len(train_ids)),
+        "hand": hand, "kind": kind, "config": config.to_dict(), "demos": int(data.n_demos), "train_demos": int(len(train_ids)),
         "val_demos": int(len(val_ids)), "samples": int(len(data.steps)), "cabinets": len(set(data.cabinets)),
         "max_time": round(data.max_time, 3), "stop_time": round(data.stop_time, 3), "parameters": int(sum(p.numel() for p in model.parameters())),
         "seconds": round(seconds, 1), "threads": torch.get_num_threads(), "history": history,
