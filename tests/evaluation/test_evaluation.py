@@ -135,7 +135,7 @@ def test_opend_run_with_several_seeds_runs_each_episode_in_each_draw(small_datas
     assert len(load_results(out)) == 2
 
 
-def test_make_jobs_keeps_the_named_targets_and_refuses_an_unknown_one(small_dataset):
+def test_make_jobs_keeps_the_named_targets_or_kind_and_refuses_an_unknown_one(small_dataset):
     """`opend run --target ID[:JOINT]` reruns chosen cabinets or single targets (e.g. an earlier
     run's failures); a target the split does not hold is a clear error, not an empty run."""
     from opend_mj.assets.layout import load_manifest
@@ -150,3 +150,10 @@ def test_make_jobs_keeps_the_named_targets_and_refuses_an_unknown_one(small_data
     assert len(jobs) == 1 + n1 and {j.cabinet for j in jobs} == {c0["id"], c1["id"]}
     with pytest.raises(ValueError, match="no target nope:joint_9"):
         make_jobs(small_dataset, ["franka"], "oracle", split="all", targets=["nope:joint_9"])
+    # --kind: only drawers (or doors), in manifest order, before --limit
+    for kind in ("drawer", "door"):
+        of_kind = [(c["id"], t["joint"]) for c, t in pairs if t["type"] == kind]
+        assert of_kind and [(j.cabinet, j.joint) for j in make_jobs(small_dataset, ["franka"], "oracle", split="all",
+                                                                    kind=kind)] == of_kind
+        limited = make_jobs(small_dataset, ["franka"], "oracle", split="all", kind=kind, limit=1)
+        assert [(j.cabinet, j.joint, j.target_type) for j in limited] == [(*of_kind[0], kind)]

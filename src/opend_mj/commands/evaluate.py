@@ -67,6 +67,8 @@ def _check_cabinets(ctx, param, value):
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--target", "targets", multiple=True, metavar="ID[:JOINT]",
               help="Only this cabinet (every target) or this target of it, e.g. 45780:joint_1 (repeatable).")
+@click.option("--kind", type=click.Choice(["drawer", "door"]), default=None,
+              help="Only targets of this kind (drawers or doors) [both].")
 @click.option("--seed", "seeds", type=int, multiple=True, default=(0,), show_default=True,
               help="Episode seed: each cabinet's room, light and camera. Repeat to run every episode "
                    "in several draws of the scenes (one record per seed; `opend score` pools them).")
@@ -91,7 +93,8 @@ def _check_cabinets(ctx, param, value):
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.pass_context
-def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, seeds, video_dir, light_scale,
+def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, kind, seeds, video_dir,
+        light_scale,
         pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
@@ -132,7 +135,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
         jobs = [job for seed in dict.fromkeys(seeds)
                 for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
                                      pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
-                                     physics_timestep=physics_timestep, targets=targets or None)]
+                                     physics_timestep=physics_timestep, targets=targets or None, kind=kind)]
     except ValueError as exc:
         raise click.BadParameter(str(exc), ctx, param_hint="--target") from None
     if policy_spec is not None:

@@ -13,11 +13,12 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
               light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
               video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
               paraphrase: int = 0, physics_timestep: float | None = None,
-              targets: Iterable[str] | None = None) -> list[EpisodeJob]:
+              targets: Iterable[str] | None = None, kind: str | None = None) -> list[EpisodeJob]:
     """Episodes of a run, hand by hand over the split's (cabinet, target) pairs in manifest order.
 
     ``cabinet_ids`` keeps whole cabinets; ``targets`` keeps ``"ID"`` (every target of a cabinet) or
-    ``"ID:JOINT"`` (one target), e.g. to rerun the failures of an earlier run.
+    ``"ID:JOINT"`` (one target), e.g. to rerun the failures of an earlier run; ``kind`` ("drawer"
+    or "door") keeps that kind of target (before ``limit``).
     """
     cabinets_dir = Path(cabinets_dir)
     manifest = load_manifest(cabinets_dir)
@@ -31,6 +32,8 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
         found = {c["id"] for c, _ in pairs} | {f"{c['id']}:{t['joint']}" for c, t in pairs}
         if wanted - found:
             raise ValueError(f"{cabinets_dir}: no target {', '.join(sorted(wanted - found))} in split {split!r}")
+    if kind is not None:
+        pairs = [(c, t) for c, t in pairs if t.get("type") == kind]
     if limit is not None:
         pairs = pairs[:limit]
     jobs = []
