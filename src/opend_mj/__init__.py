@@ -7,7 +7,7 @@ from pathlib import Path
 # mujoco or dm_control is first imported; set MUJOCO_GL=glfw yourself for an on-screen viewer.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-__version__ = "0.6.0"
+__version__ = "0.7.0"
 
 #: Repository root when installed in development mode (src layout); used for default paths.
 PROJECT_ROOT = Path(__file__).resolve().parents[2]

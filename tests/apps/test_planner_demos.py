@@ -214,6 +214,13 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
                                        "--route", "drawer=1"])
     assert result.exit_code == 0 and "drawer: members [1]" in result.output, result.output
     assert len(load_policies([routed], kind="drawer")) == 1 and len(load_policies([routed], kind="door")) == 2
+    # a bundle re-bundled (here: to route doors too) keeps its members' own files as its sources
+    rerouted = tmp_path / "rerouted.pt"
+    result = CliRunner().invoke(main, ["bundle-policy", str(routed), "--out", str(rerouted), "--route", "drawer=1",
+                                       "--route", "door=0"])
+    assert result.exit_code == 0, result.output
+    assert torch.load(rerouted, weights_only=False)["summary"]["sources"] == [str(ckpts["s0"]), str(ckpts["s1"])]
+    assert len(load_policies([rerouted], kind="door")) == 1
     drawer_action, agent = first_action(str(routed), "drawer")
     assert len(agent.models) == 1
     np.testing.assert_allclose(drawer_action, first_action(str(ckpts["s1"]), "drawer")[0], atol=1e-6)

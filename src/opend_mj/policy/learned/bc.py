@@ -360,10 +360,13 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     import torch
 
     load_policies(paths)  # the same checks as at run time, before anything is written
-    members = []
+    members, sources = [], []
     for path in paths:
         ckpt = torch.load(path, map_location="cpu", weights_only=False)
-        members += ckpt["members"] if ckpt.get("format") == ENSEMBLE_FORMAT else [ckpt]
+        bundled = ckpt.get("format") == ENSEMBLE_FORMAT
+        members += ckpt["members"] if bundled else [ckpt]
+        # a bundle re-bundled (e.g. to add a route) keeps the files its members came from
+        sources += ckpt.get("summary", {}).get("sources", [str(path)]) if bundled else [str(path)]
     if ensemble_decay is not None:
         members = [{**m, "config": {**m["config"], "ensemble_decay": float(ensemble_decay)}} for m in members]
     routes = {str(k): [int(i) for i in v] for k, v in (routes or {}).items()}
@@ -378,7 +381,7 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
         return float(np.mean([members[i].get("stop_time", members[i].get("max_time", 0.0)) for i in ids]))
 
     first = members[0]
-    summary = {"members": len(members), "sources": [str(p) for p in paths], "hand": first["hand"],
+    summary = {"members": len(members), "sources": sources, "hand": first["hand"],
                "seeds": [m["config"].get("seed") for m in members],
                "ensemble_decay": float(np.mean([m["config"].get("ensemble_decay", 0.01) for m in members])),
                "stop_time": stop_of(range(len(members)))}
