@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real install install-mjx system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -89,6 +89,13 @@ $(VENV)/.installed: pyproject.toml
 ## installed, so `install` and CI leave it out; see docs/batched-simulation.md).
 install-mjx: install
 	$(BIN)/pip install -q -e '.[mjx]'
+
+## LeRobot's library in an environment of its own (it pins torch < 2.11, this project 2.14), for
+## tools/demos_to_lerobot.py: about 8 GB with torch's CUDA wheels.
+LEROBOT_VENV ?= build/lerobot-venv
+install-lerobot:
+	test -x $(LEROBOT_VENV)/bin/python || $(PYTHON) -m venv $(LEROBOT_VENV)
+	$(LEROBOT_VENV)/bin/pip install -q 'lerobot==0.4.*' h5py
 
 ## Compile the default dataset: 346 procedural sources -> cabinets/ + manifest.json.
 assets: install
