@@ -117,7 +117,8 @@ def verify(src: Path, out: Path, repo_id: str, action: str = "absolute") -> dict
                 image_error = max(image_error, float(np.abs(img - d["obs"]["rgb"][t] / 255.0).mean()))
                 assert image_error < 0.03, f"episode {e}: decoded image differs by {image_error:.3f} on average"
             row += length
-    return {"episodes": ds.meta.total_episodes, "frames": len(ds), "image_error": round(image_error, 4)}
+    return {"episodes": ds.meta.total_episodes, "frames": len(ds),
+            "image_error": round(image_error, 4) if IMAGE_KEY in ds.features else None}
 
 
 def demo_names(data) -> list[str]:
@@ -203,9 +204,10 @@ def main(argv=None) -> int:
         print(f"{counts['episodes']} episodes, {counts['frames']} frames -> {args.out}")
         if args.verify:
             checked = verify(args.demos, args.out, args.repo_id, action=args.action)
+            images = ("no images" if checked["image_error"] is None
+                      else f"images within {checked['image_error']:.3f} mean error")
             print(f"verified with LeRobot's loader: {checked['episodes']} episodes, {checked['frames']} frames "
-                  f"(state, environment state and action exact; images within {checked['image_error']:.3f} "
-                  "mean error)")
+                  f"(state, environment state and action exact; {images})")
     except (ValueError, FileExistsError, FileNotFoundError, ImportError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
