@@ -68,7 +68,8 @@ def test_demos_round_trip_through_lerobots_loader(demos_with_images, tmp_path):
     each episode's task is its instruction, and the camera comes back as a video feature."""
     python = lerobot_python()
     if python is None:
-        pytest.skip("no Python with lerobot (make install-lerobot, or set OPEND_LEROBOT_PYTHON)")
+        pytest.skip("the optional extra LeRobot environment is not installed (make install-lerobot, or set "
+                    "OPEND_LEROBOT_PYTHON to a Python with lerobot)")
     out = tmp_path / "ds"
     result = run_tool(python, demos_with_images, "--out", out, "--repo-id", "opend-mj/test", "--verify", cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-2000:]
