@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from opend_mj.commands.evaluate import _check_cabinets, _check_hands, _check_solver
+from opend_mj.language import TARGET_KINDS
 
 
 @click.command("demos")
@@ -72,7 +73,7 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--lr", type=float, default=None, help="[1e-3]")
 @click.option("--chunk", type=click.IntRange(min=1), default=None, help="Actions per prediction [20].")
 @click.option("--d-model", type=click.IntRange(min=8), default=None, help="Transformer width [64].")
-@click.option("--kind", type=click.Choice(["drawer", "door"]), default=None,
+@click.option("--kind", type=click.Choice(TARGET_KINDS), default=None,
               help="Train on the demos of this kind of target only (a member that a bundle routes that kind "
                    "to: `opend bundle-policy --route`) [both].")
 @click.option("--seed", type=int, default=0, show_default=True)

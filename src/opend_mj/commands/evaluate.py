@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from opend_mj.language import TARGET_KINDS
+
 
 def _check_hands(ctx, param, value):
     from opend_mj.sim.hands import list_hands
@@ -67,7 +69,7 @@ def _check_cabinets(ctx, param, value):
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--target", "targets", multiple=True, metavar="ID[:JOINT]",
               help="Only this cabinet (every target) or this target of it, e.g. 45780:joint_1 (repeatable).")
-@click.option("--kind", type=click.Choice(["drawer", "door"]), default=None,
+@click.option("--kind", type=click.Choice(TARGET_KINDS), default=None,
               help="Only targets of this kind (drawers or doors) [both].")
 @click.option("--seed", "seeds", type=int, multiple=True, default=(0,), show_default=True,
               help="Episode seed: each cabinet's room, light and camera. Repeat to run every episode "

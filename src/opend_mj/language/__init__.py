@@ -21,8 +21,12 @@ from opend_mj.language.algorithm1 import (
 from opend_mj.language.grammar import PARAPHRASES, paraphrase, rewordings
 from opend_mj.language.parser import InstructionNotUnderstood, normalise, parse_instruction
 
+#: The kinds of target an instruction names (`target_kind`): what a run, a training set or an
+#: ensemble's route can be restricted to.
+TARGET_KINDS = ("drawer", "door")
+
 __all__ = [
-    "Description", "LanguageConfig", "LanguageInvalid", "TargetLayout", "describe", "levels", "PARAPHRASES",
+    "TARGET_KINDS", "Description", "LanguageConfig", "LanguageInvalid", "TargetLayout", "describe", "levels", "PARAPHRASES",
     "paraphrase", "rewordings", "InstructionNotUnderstood", "normalise", "parse_instruction",
     "describe_instruction", "canonical_instruction", "target_kind", "hinge_side", "all_templates",
 ]
@@ -43,7 +47,8 @@ def canonical_instruction(instruction: str) -> str:
 
 
 def target_kind(instruction: str) -> str:
-    """door or drawer, as the instruction names it; raises :class:`InstructionNotUnderstood`."""
+    """door or drawer (one of `TARGET_KINDS`), as the instruction names it; raises
+    :class:`InstructionNotUnderstood`."""
     return parse_instruction(instruction).kind
 
 

@@ -344,10 +344,6 @@ def _member(ckpt: dict, device: str):
     return model.eval().to(device), config, ckpt
 
 
-#: Target kinds a bundle may route to its own members (the instruction names one: `language.target_kind`).
-ROUTE_KINDS = ("drawer", "door")
-
-
 def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dict | None = None) -> dict:
     """Write the checkpoints ``paths`` (checked as :func:`load_policies` checks them) into one file
     ``out`` that `opend run --policy bc` loads as their ensemble; ``ensemble_decay`` (the temporal
@@ -358,6 +354,8 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     from pathlib import Path
 
     import torch
+
+    from opend_mj.language import TARGET_KINDS
 
     load_policies(paths)  # the same checks as at run time, before anything is written
     members, sources = [], []
@@ -371,8 +369,8 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
         members = [{**m, "config": {**m["config"], "ensemble_decay": float(ensemble_decay)}} for m in members]
     routes = {str(k): [int(i) for i in v] for k, v in (routes or {}).items()}
     for kind, ids in routes.items():
-        if kind not in ROUTE_KINDS:
-            raise ValueError(f"route {kind!r}: a target kind is one of {', '.join(ROUTE_KINDS)}")
+        if kind not in TARGET_KINDS:
+            raise ValueError(f"route {kind!r}: a target kind is one of {', '.join(TARGET_KINDS)}")
         if not ids or any(not 0 <= i < len(members) for i in ids):
             raise ValueError(f"route {kind}={ids}: member indices must be 0..{len(members) - 1} "
                              f"(the bundle has {len(members)} members), at least one")
@@ -395,6 +393,6 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     return summary
 
 
-__all__ = ["BCConfig", "ENSEMBLE_FORMAT", "ROUTE_KINDS", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
+__all__ = ["BCConfig", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
            "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
            "percept_vector", "quat_from_rot6", "rot6", "step_features"]
