@@ -543,7 +543,7 @@ def write_readme(name: str, source_doc: str) -> None:
 
 
 if __name__ == "__main__":
-    from opend_mj.sim.hand_scene import write_scene_xml
+    from opend_mj.sim.hands.scene import write_scene_xml
 
     builders = {"franka": build_franka, "allegro": build_allegro, "shadow": build_shadow,
                 "skeleton": build_skeleton}

@@ -9,7 +9,8 @@ import time
 import mujoco
 from dm_control import mjcf
 
-from opend_mj.sim import hand_scene, hands
+from opend_mj.sim import hands
+from opend_mj.sim.hands import scene as hand_scene
 
 
 def bench_alone(name: str, seconds: float) -> float:

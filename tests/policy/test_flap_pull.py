@@ -83,7 +83,7 @@ def _pull_flap(part: HeldFlap, config: PlannerConfig, front_z: tuple) -> float:
     g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     state = PullState(quat0=quat, front_z=front_z)
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, True, state, result)
+    planner.pulling.pull(part, g, True, state, result)
     return part.opening / part.travel
 
 
@@ -118,7 +118,7 @@ def test_no_flap_where_the_front_has_no_edge_for_its_hinge():
     g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     state = PullState(quat0=quat, front_z=(START_Z + 0.4, START_Z - 0.05))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, True, state, result)
+    planner.pulling.pull(part, g, True, state, result)
     assert state.flap is None and not any("flap" in e for e in result.events)
 
 
@@ -222,7 +222,7 @@ def _pull_loose_flap(sign: float, radius: float, config: PlannerConfig) -> tuple
     quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
     g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, True, PullState(quat0=quat), result)
+    planner.pulling.pull(part, g, True, PullState(quat0=quat), result)
     return part.opening / part.travel, result.events
 
 

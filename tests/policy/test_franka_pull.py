@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from opend_mj.policy.planner import GraspChoice, Observation, Planner, PlannerConfig, PlanResult, PullState
-from opend_mj.policy.planner.hand import HandPlannerConfig
+from opend_mj.sim.hands import HandPlannerConfig
 from opend_mj.policy.planner.records import Flap
 from opend_mj.policy.solvers import get_solver
-from opend_mj.sim.hands import HANDS_DIR, load_spec
+from opend_mj.sim.hands import HANDS_DIR, get_hand, load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
 
 from .test_narrow_door_pull import PANEL_X, PROUD, SeenDoor, _view
@@ -56,7 +56,7 @@ def _pull(part: PadDoor, hand: HandPlannerConfig, hinge: tuple) -> tuple[float, 
     ``hinge`` (world x, y): (the fraction of its travel it opened, the planner's events)."""
     from opend_mj.policy.perception import HandleEstimate
 
-    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), PlannerConfig(), hand=hand)
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"), PlannerConfig(), numbers=hand)
     planner.state.hinge = np.asarray(hinge, float)
     planner.state.handle = HandleEstimate(centre=part.handle_pos(), orientation="horizontal", kind="bar",
                                           size=(0.1, 0.008), front_x=PANEL_X - PROUD - 0.004, panel_x=PANEL_X)
@@ -64,7 +64,7 @@ def _pull(part: PadDoor, hand: HandPlannerConfig, hinge: tuple) -> tuple[float, 
     quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)  # approach axis +x
     g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, True, PullState(quat0=quat), result)
+    planner.pulling.pull(part, g, True, PullState(quat0=quat), result)
     return part.opening / part.travel, result.events
 
 
@@ -100,8 +100,8 @@ def test_a_flap_circle_is_at_least_the_hands_share_of_the_far_edge():
     spec = load_spec("franka")
     radii = []
     for hand in (HandPlannerConfig(), HandPlannerConfig(flap_min_radius_share=1.0)):
-        planner = Planner(get_solver("oracle", ground_truth=lambda: None), spec, PlannerConfig(), hand=hand)
-        radii.append(planner._flap_radius(flap, PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]), track=track)))
+        planner = Planner(get_solver("oracle", ground_truth=lambda: None), spec, PlannerConfig(), numbers=hand)
+        radii.append(planner.flap.radius(flap, PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]), track=track)))
     assert radii[0] == pytest.approx(PlannerConfig().door.flap_min_radius_share * reach, abs=1e-6)
     assert radii[1] == pytest.approx(reach, abs=1e-6)
 
@@ -114,7 +114,7 @@ def test_the_franka_turns_them_on_and_the_other_hands_do_not():
     assert franka.flap_min_radius_share == 1.0
     assert franka.clearance_pitches and min(franka.clearance_pitches) > franka.low_handle_pitch
     for name in ("allegro", "shadow", "skeleton"):
-        other = HandPlannerConfig.for_hand(load_spec(name))
+        other = get_hand(name).planner
         assert other.yaw_rate is None and other.flap_min_radius_share is None, name
 
 

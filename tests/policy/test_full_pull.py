@@ -76,7 +76,7 @@ def _pull(part: HeldPart, config: PlannerConfig, hinge_seen: bool = True) -> flo
     g = GraspChoice("hook", "vertical", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     state = PullState(quat0=quat)
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    status = planner.pull(part, g, door, state, result)
+    status = planner.pulling.pull(part, g, door, state, result)
     assert status == "done", result.events
     assert part.time <= config.max_time
     return part.opening / part.travel
@@ -131,7 +131,7 @@ def test_pulls_say_where_they_ended():
     quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)
     g = GraspChoice("hook", "vertical", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, False, PullState(quat0=quat), result)
+    planner.pulling.pull(part, g, False, PullState(quat0=quat), result)
     ends = [e["pull_end"] for e in result.events if "pull_end" in e]
     assert ends == ["stall"]
 
@@ -148,9 +148,9 @@ def test_no_push_recovery_without_the_time_it_needs():
     state.turned = 40.0
     part.n_steps = int(round((PlannerConfig().max_time - 5.0) / DT))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    assert planner.recover_door(part, state, result) is False
+    assert planner.recovery.recover_door(part, state, result) is False
     assert result.events[-1] == {"push_skipped": {"time_left": pytest.approx(5.0, abs=0.02)}}
-    assert planner.door_arc(state) is not None  # the arc is known: only the time held the push back
+    assert planner.recovery.door_arc(state) is not None  # the arc is known: only the time held the push back
 
 
 def test_no_push_where_the_camera_sees_the_door_front_not_moving(grasp_scenes):
@@ -181,7 +181,7 @@ def test_no_push_where_the_camera_sees_the_door_front_not_moving(grasp_scenes):
             state.track.append(part.site_pos())
         state.turned = 40.0
         result = PlanResult(stage_reached="pull", failed_stage=None)
-        return planner.recover_door(part, state, result), result, part
+        return planner.recovery.recover_door(part, state, result), result, part
 
     pushed, result, part = lost_door(PlannerConfig(), lambda: depth.copy())  # the front as at the start
     assert pushed is False and part.n_steps == 0

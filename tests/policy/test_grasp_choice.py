@@ -65,22 +65,22 @@ def _choose(hand, boxes, handle_box_world, instruction="top drawer", kind="drawe
     from dataclasses import replace
 
     from opend_mj.policy.perception import estimate_handle
-    from opend_mj.policy.planner import HandPlannerConfig, Observation, PlanResult, Planner, PlannerConfig
+    from opend_mj.policy.planner import Observation, PlanResult, Planner, PlannerConfig
     from opend_mj.policy.solvers import get_solver
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand, load_spec
 
     view = _view()
     depth = _render(view, boxes)
     box = _box_of(view, *handle_box_world)
     spec = load_spec(hand)
-    numbers = replace(HandPlannerConfig.for_hand(spec), **hand_numbers)
+    numbers = replace(get_hand(spec.name).planner, **hand_numbers)
     planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), spec,
-                      PlannerConfig().override(overrides or {}), hand=numbers)
+                      PlannerConfig().override(overrides or {}), numbers=numbers)
     obs = Observation(rgb=None, depth=depth, instruction=instruction, camera_view=view)
     result = PlanResult(stage_reached="locate", failed_stage=None, target_kind=kind)
     handle = estimate_handle(box, depth, view, planner.config.perception)
     shape = planner.perceive(handle, box, obs, result)
-    grasp = planner.choose_grasp(handle, shape, obs, result)
+    grasp = planner.grasping.choose_grasp(handle, shape, obs, result)
     return handle, shape, grasp
 
 
@@ -174,10 +174,9 @@ def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
 def test_a_bar_near_the_floor_is_grasped_from_above(hand):
     """A door bar 6 cm above the floor: the grasp site goes above the bar, so that the open fingers
     pointing down clear the floor; the same bar 30 cm up is grasped at its centre."""
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand
 
-    numbers = HandPlannerConfig.for_hand(load_spec(hand))
+    numbers = get_hand(hand).planner
     lift, slide = numbers.low_handle_lift, numbers.hook_slide
     assert lift > 0.0 and lift >= slide  # the lift already puts the bar that far out along the fingers
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
@@ -193,11 +192,10 @@ def test_the_gripper_pitches_down_for_a_bar_near_the_floor():
     """The gripper's body is 21 cm wide along its finger axis: for a bar 6 cm above the floor it comes
     from above and in front, pitched down, so that the body's lower end stays above the floor and its
     upper end off the door; a bar 30 cm up is approached level."""
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand
     from opend_mj.transforms import quat_to_mat
 
-    pitch = np.radians(HandPlannerConfig.for_hand(load_spec("franka")).low_handle_pitch)
+    pitch = np.radians(get_hand("franka").planner.low_handle_pitch)
     assert pitch > 0.0
     low_bar, low_posts = _bar(thickness=0.012, gap=0.02, length=0.2, z=0.06)
     # (the gripper's own press from above, press_depth, is test_hook_from_above's)
@@ -213,10 +211,9 @@ def test_the_skeleton_grasps_no_lower_than_its_floor_clearance():
     """The Skeleton's fingers point down behind a low bar and strike the floor below a grasp site
     5 cm up: a door bar 3 cm above the floor is grasped at 5 cm (at its top edge), one 8 cm up at
     its centre. Other hands keep their own lift."""
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand
 
-    floor = HandPlannerConfig.for_hand(load_spec("skeleton")).min_grasp_height
+    floor = get_hand("skeleton").planner.min_grasp_height
     low_bar, low_posts = _bar(thickness=0.014, gap=0.016, length=0.1, z=0.03)
     handle, _, low = _choose("skeleton", [low_bar, *low_posts], low_bar, "door", kind="door")
     assert handle.centre[2] < floor - 0.015
@@ -274,20 +271,20 @@ def _choose_events(hand, boxes, handle_box, **hand_numbers):
     from dataclasses import replace
 
     from opend_mj.policy.perception import estimate_handle
-    from opend_mj.policy.planner import HandPlannerConfig, Observation, PlanResult, Planner, PlannerConfig
+    from opend_mj.policy.planner import Observation, PlanResult, Planner, PlannerConfig
     from opend_mj.policy.solvers import get_solver
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand, load_spec
 
     view = _view()
     depth = _render(view, boxes)
     box = _box_of(view, *handle_box)
     spec = load_spec(hand)
     planner = Planner(get_solver("oracle", ground_truth=lambda: box.as_tuple()), spec, PlannerConfig(),
-                      hand=replace(HandPlannerConfig.for_hand(spec), **hand_numbers))
+                      numbers=replace(get_hand(spec.name).planner, **hand_numbers))
     obs = Observation(rgb=None, depth=depth, instruction="door", camera_view=view)
     result = PlanResult(stage_reached="locate", failed_stage=None, target_kind="door")
     handle = estimate_handle(box, depth, view, planner.config.perception)
-    planner.choose_grasp(handle, planner.perceive(handle, box, obs, result), obs, result)
+    planner.grasping.choose_grasp(handle, planner.perceive(handle, box, obs, result), obs, result)
     return result.events
 
 

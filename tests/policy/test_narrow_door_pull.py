@@ -161,7 +161,7 @@ def _pull(part: NarrowDoor, config: PlannerConfig, hinge: tuple | None = None) -
     quat = axis_angle_quat((0.0, 1.0, 0.0), math.pi / 2)  # approach axis +x
     g = GraspChoice("hook", "horizontal", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner.pull(part, g, True, PullState(quat0=quat), result)
+    planner.pulling.pull(part, g, True, PullState(quat0=quat), result)
     assert part.time <= config.max_time
     return part.opening / part.travel, result.events
 

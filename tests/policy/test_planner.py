@@ -118,14 +118,14 @@ def test_a_door_pulled_past_its_stop_is_not_dragged_back():
     planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("skeleton"), PlannerConfig())
     state = PullState(quat0=np.array([1.0, 0, 0, 0]))
     state.peak_turn = -108.0
-    assert not planner._turned_back(state, -100.0)  # a wobble
-    assert planner._turned_back(state, -75.0)  # 33 degrees back toward closing
-    assert planner._turned_back(state, 40.0)
+    assert not planner.pulling._turned_back(state, -100.0)  # a wobble
+    assert planner.pulling._turned_back(state, -75.0)  # 33 degrees back toward closing
+    assert planner.pulling._turned_back(state, 40.0)
     state.peak_turn = 20.0  # not turned enough yet: the direction is still settling
-    assert not planner._turned_back(state, -15.0)
+    assert not planner.pulling._turned_back(state, -15.0)
     off = Planner(planner.solver, planner.spec, PlannerConfig(door=DoorConfig(turn_back_deg=None)))
     state.peak_turn = -108.0
-    assert not off._turned_back(state, 40.0)
+    assert not off.pulling._turned_back(state, 40.0)
 
 
 def test_solver_registry():
@@ -218,14 +218,14 @@ def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
     planner.state.hinge = np.array([0.0, -0.5])  # hinge on the right (-y), handle 0.4 m from it
     state = PullState(quat0=np.array([1.0, 0, 0, 0]))
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    planner._start_hinge_pull(state, np.array([-0.03, -0.1, 0.5]), result)
+    planner.pulling._start_hinge_pull(state, np.array([-0.03, -0.1, 0.5]), result)
     assert state.hinge is not None
-    t0, a0 = planner._hinge_tangent(state, np.array([-0.03, -0.1, 0.5]))
+    t0, a0 = planner.pulling._hinge_tangent(state, np.array([-0.03, -0.1, 0.5]))
     assert t0[0] < -0.99 and abs(a0) < 5.0  # straight out of the cabinet at first
     th = math.radians(30)  # the door opened 30 degrees toward the hinge side (-y)
     for radius in (0.4, 0.3):  # the hand slid 10 cm along the bar toward the hinge: same tangent
         site = np.array([-radius * math.sin(th), -0.5 + radius * math.cos(th), 0.5])
-        t, ang = planner._hinge_tangent(state, site)
+        t, ang = planner.pulling._hinge_tangent(state, site)
         assert abs(ang) == pytest.approx(30.0, abs=1.0)
         assert t[0] < 0 and t[1] < 0  # away from the cabinet and toward the hinge side
         assert abs(float(t[:2] @ (site[:2] - planner.state.hinge))) < 1e-6  # tangent to the circle
@@ -273,19 +273,19 @@ def test_kind_from_the_held_path():
     down and out. Short paths say nothing."""
     from opend_mj.policy.planner import Planner, PlannerConfig
 
-    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    planner = Planner(solver=None, hand=None, config=PlannerConfig())
     s = np.linspace(0.0, 0.15, 60)
     straight = np.stack([0.5 - s, np.full_like(s, 0.1), np.full_like(s, 0.6)], 1)
-    assert planner.kind_from_track(list(straight))[0] == "drawer"
-    assert planner.kind_from_track(list(straight[:20]))[0] is None  # 5 cm: too short to tell
+    assert planner.kind.kind_from_track(list(straight))[0] == "drawer"
+    assert planner.kind.kind_from_track(list(straight[:20]))[0] is None  # 5 cm: too short to tell
     r = 0.4  # a door 40 cm wide hinged at y = -0.3
     phi = s / r
     arc = np.stack([0.5 - r * np.sin(phi), -0.3 + r * np.cos(phi), np.full_like(s, 0.6)], 1)
-    kind, turn, _ = planner.kind_from_track(list(arc))
+    kind, turn, _ = planner.kind.kind_from_track(list(arc))
     assert kind == "door" and 12.0 < turn < 22.0, turn
     r = 0.2  # a flap 20 cm tall hinged at its bottom edge (tilt: hands sag up to ~20 degrees on drawers)
     flap = np.stack([0.5 - r * np.sin(s / r), np.full_like(s, 0.1), 0.2 + r * np.cos(s / r)], 1)
-    assert planner.kind_from_track(list(flap))[0] == "door"
+    assert planner.kind.kind_from_track(list(flap))[0] == "door"
 
 
 def _front_depth(view, hinge, axis: str, angle_deg: float, shift: float = 0.0, width: float = 0.6) -> np.ndarray:
@@ -321,7 +321,7 @@ def test_kind_from_the_front_seen_moving():
     from opend_mj.policy.planner import Planner, PlannerConfig
 
     view = _forward_view()
-    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    planner = Planner(solver=None, hand=None, config=PlannerConfig())
     closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
     handle = np.array([0.97, 0.25, 0.0])  # near the free edge, 3 cm proud
     cases = {"drawer": _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.12),
@@ -336,10 +336,10 @@ def test_kind_from_the_front_seen_moving():
         site = handle - np.array([0.12, 0.0, 0.0])
         front = front_motion(closed, depth, view, handle, 1.0, site)
         assert front is not None, name
-        seen[name] = planner.kind_from_front(front)
+        seen[name] = planner.kind.kind_from_front(front)
     assert seen == {"drawer": "drawer", "door": "door", "flap": "door", "double": "door"}, seen
     assert front_motion(closed, closed, view, handle, 1.0, handle) is None  # nothing moved: unclear
-    assert planner.kind_from_front(None) is None
+    assert planner.kind.kind_from_front(None) is None
 
 
 def test_a_drawer_pulled_for_a_named_door_is_given_up_by_its_front():
@@ -348,15 +348,15 @@ def test_a_drawer_pulled_for_a_named_door_is_given_up_by_its_front():
     disagree still give nothing up, and neither does a handle read as the named kind."""
     from opend_mj.policy.planner import Planner, PlannerConfig
 
-    planner = Planner(solver=None, spec=None, config=PlannerConfig())
-    assert planner.wrong_kind("door", "door", "drawer") == ("drawer", "front")
-    assert planner.wrong_kind("door", None, "drawer") == ("drawer", "front")
-    assert planner.wrong_kind("door", "door", "door") is None
-    assert planner.wrong_kind("door", "door", None) is None
-    assert planner.wrong_kind("drawer", "door", None) == ("door", "path")
-    assert planner.wrong_kind("drawer", "drawer", "door") is None  # they disagree: kept
-    assert planner.wrong_kind("drawer", "door", "drawer") is None
-    assert planner.wrong_kind("drawer", "drawer", "drawer") is None
+    planner = Planner(solver=None, hand=None, config=PlannerConfig())
+    assert planner.kind.wrong_kind("door", "door", "drawer") == ("drawer", "front")
+    assert planner.kind.wrong_kind("door", None, "drawer") == ("drawer", "front")
+    assert planner.kind.wrong_kind("door", "door", "door") is None
+    assert planner.kind.wrong_kind("door", "door", None) is None
+    assert planner.kind.wrong_kind("drawer", "door", None) == ("door", "path")
+    assert planner.kind.wrong_kind("drawer", "drawer", "door") is None  # they disagree: kept
+    assert planner.kind.wrong_kind("drawer", "door", "drawer") is None
+    assert planner.kind.wrong_kind("drawer", "drawer", "drawer") is None
 
 
 def test_a_part_left_ajar_is_no_motion_of_the_next_front():
@@ -370,16 +370,16 @@ def test_a_part_left_ajar_is_no_motion_of_the_next_front():
     view = _forward_view()
     closed = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0)
     ajar = _front_depth(view, (1.0, 0.0, 0.0), "side", 0.0, shift=0.07)  # after the push back
-    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    planner = Planner(solver=None, hand=None, config=PlannerConfig())
     first = Observation(rgb=np.zeros((256, 256, 3), np.uint8), depth=closed, instruction="door", camera_view=view)
     planner.state.first = first
     planner.state.handle = SimpleNamespace(centre=np.array([0.97, 0.25, 0.0]), panel_x=1.0)
     robot = SimpleNamespace(look=lambda: ajar)  # the next handle has not moved its front (yet)
     site = np.array([0.85, 0.25, 0.0])
-    assert planner.kind_from_front(planner.front_seen(robot, site)) == "drawer"  # against the first image
+    assert planner.kind.kind_from_front(planner.front.seen(robot, site)) == "drawer"  # against the first image
     planner._look_again(robot, first)
     assert planner.state.first.rgb is first.rgb and planner.state.first.depth is ajar
-    assert planner.front_seen(robot, site) is None  # nothing moved since the push back
+    assert planner.front.seen(robot, site) is None  # nothing moved since the push back
 
 
 class _WrongKindFirst:
@@ -449,6 +449,6 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     assert rec["success"] and rec["open_ratio"] > 0.2, rec
     from opend_mj.policy.planner import Planner, PlannerConfig
 
-    reader = Planner(solver=None, spec=None, config=PlannerConfig())
-    assert [reader.kind_from_front(f) for f in rec["front_seen"]] == ["drawer", "door"], rec["front_seen"]
+    reader = Planner(solver=None, hand=None, config=PlannerConfig())
+    assert [reader.kind.kind_from_front(f) for f in rec["front_seen"]] == ["drawer", "door"], rec["front_seen"]
     # (the drawer is pushed back, but stays ~2 cm out: pulled as a door, the hand slid along its bar)

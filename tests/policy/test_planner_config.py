@@ -53,30 +53,84 @@ def test_grasp_profile_sets_finger_closing_and_depth():
                     flap_min_radius_share=1.0, clearance_pitches=(40.0, 45.0, 50.0))),
 ])
 def test_each_hand_carries_its_planner_numbers(hand, expected):
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import HANDS_DIR, load_spec
+    from opend_mj.sim.hands import HANDS_DIR, get_hand
 
     assert (HANDS_DIR / hand / "planner.json").is_file()
-    numbers = HandPlannerConfig.for_hand(load_spec(hand))
+    numbers = get_hand(hand).planner
     for key, value in expected.items():
         assert getattr(numbers, key) == value, key
 
 
 def test_a_hand_without_a_planner_file_gets_its_types_numbers(tmp_path):
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
+    """A user's hand registered from a folder with no planner.json gets its type's numbers."""
+    import shutil
 
-    gripper = dataclasses.replace(load_spec("franka"), name="my_gripper")
-    numbers = HandPlannerConfig.for_hand(gripper, hands_dir=tmp_path)
-    assert numbers.hold_parts == 2 and numbers.grip_lost_change == 0.012 and numbers.low_handle_pitch == 0.0
-    dexterous = dataclasses.replace(load_spec("allegro"), name="my_hand")
-    numbers = HandPlannerConfig.for_hand(dexterous, hands_dir=tmp_path)
-    assert numbers.pinch_gap == 0.012 and numbers.low_handle_lift == 0.0 and numbers.grip_lost_change is None
-    assert HandPlannerConfig.for_hand(None) == HandPlannerConfig()
+    from opend_mj.policy.planner import HandPlannerConfig, Planner
+    from opend_mj.sim.hands import HANDS_DIR, load_spec, register_hand
+
+    for name, source in (("my_gripper", "franka"), ("my_hand", "allegro")):
+        folder = tmp_path / name
+        folder.mkdir()
+        shutil.copy(HANDS_DIR / source / "hand.xml", folder / "hand.xml")
+        spec = dataclasses.replace(load_spec(source), name=name)
+        spec.save(folder / "spec.json")
+        model = register_hand(name, folder / "hand.xml", folder / "spec.json", overwrite=True)
+        assert model.grasp is None and model.folder == folder.resolve()
+        if name == "my_gripper":
+            assert model.planner.hold_parts == 2 and model.planner.grip_lost_change == 0.012
+        else:
+            assert model.planner.pinch_gap == 0.012 and model.planner.grip_lost_change is None
+    assert Planner(None, None).hand == HandPlannerConfig()
+
+
+def test_a_users_hand_is_planned_with_its_own_files(tmp_path):
+    """register_hand honours the grasp.json and planner.json beside the user's model: the planner
+    built for that hand uses them, and an unknown key in either is refused, naming the file and key."""
+    import shutil
+
+    from opend_mj.policy.factory import build_planner
+    from opend_mj.sim.hands import HANDS_DIR, load_spec, register_hand
+
+    folder = tmp_path / "my_allegro"
+    folder.mkdir()
+    shutil.copy(HANDS_DIR / "allegro" / "hand.xml", folder / "hand.xml")
+    dataclasses.replace(load_spec("allegro"), name="my_allegro").save(folder / "spec.json")
+    (folder / "planner.json").write_text(json.dumps({"hold_parts": 3, "hook_slide": 0.01}))
+    (folder / "grasp.json").write_text(json.dumps({"hand": "my_allegro", "close_scale": 0.7,
+                                                   "grasp_depth": {"bar": 0.002, "knob": 0.0},
+                                                   "knob_orientation": "vertical"}))
+    register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+    planner = build_planner("oracle", "my_allegro", ground_truth=lambda: None)
+    assert planner.hand.hold_parts == 3 and planner.hand.hook_slide == 0.01
+    assert planner.config.grasp.close_scale == 0.7 and planner.config.grasp.depth["bar"] == 0.002
+    assert planner.config.grasp.knob_orientation == "vertical"
+    assert build_planner("oracle", "my_allegro", use_grasp_file=False,
+                         ground_truth=lambda: None).config.grasp.close_scale == 1.0
+
+    (folder / "grasp.json").write_text(json.dumps({"hand": "my_allegro", "close_scael": 0.7}))
+    with pytest.raises(ValueError, match="unknown key 'close_scael'") as err:
+        register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+    assert str(folder / "grasp.json") in str(err.value)
+    (folder / "grasp.json").unlink()
+    spec = json.loads((folder / "spec.json").read_text())
+    (folder / "spec.json").write_text(json.dumps({**spec, "finger_count": 4}))
+    with pytest.raises(ValueError, match="unknown key 'finger_count'") as err:
+        register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+    assert str(folder / "spec.json") in str(err.value)
+
+
+def test_an_oracle_needs_its_ground_truth_and_an_agent_may_not_have_it():
+    from opend_mj.policy.factory import build_solver
+
+    with pytest.raises(ValueError, match="ground_truth callback"):
+        build_solver("oracle")
+    with pytest.raises(ValueError, match="which an agent may not"):
+        build_solver("oracle", ground_truth=lambda: None, for_agent=True)
+    assert build_solver("oracle", ground_truth=lambda: (1, 2, 3, 4, 5)) is not None
 
 
 @pytest.mark.parametrize("content, message", [
-    ({"low_handle_lift": 0.02, "lift_twice": 1}, "unknown field 'lift_twice'"),
+    ({"low_handle_lift": 0.02, "lift_twice": 1}, "unknown key 'lift_twice'"),
     ({"hold_parts": 0}, "hold_parts"),
     ({"pinch_gap": "wide"}, "'pinch_gap' must be a number"),
     ({"min_grasp_height": None, "low_handle_pitch": None}, "'low_handle_pitch' must be a number"),
@@ -97,12 +151,20 @@ def test_a_bad_planner_file_is_named_in_the_error(tmp_path, content, message):
 
 
 def test_the_planner_keeps_its_episode_state_in_one_record():
-    """Per-episode state lives in ``Planner.state`` (an ``EpisodeState``), made anew by each run."""
-    from opend_mj.policy.planner import EpisodeState, Planner, PlannerConfig
+    """Per-episode state lives in one ``EpisodeState`` that every stage reads (made anew by each run);
+    the planner itself holds its solver, its stage context and its stages, nothing of an episode."""
+    from opend_mj.policy.planner import EpisodeState, Planner, PlannerConfig, Stage
 
-    planner = Planner(solver=None, spec=None, config=PlannerConfig())
+    planner = Planner(solver=None, hand=None, config=PlannerConfig())
     assert isinstance(planner.state, EpisodeState) and planner.state.hinge is None
-    assert set(vars(planner)) == {"solver", "spec", "grasp", "config", "hand", "on_stage", "state"}
+    stages = {"front", "grasping", "approach", "kind", "flap", "slide", "pulling", "recovery"}
+    assert set(vars(planner)) == {"solver", "ctx"} | stages
+    fresh = EpisodeState()
+    planner.state = fresh
+    for name in stages:
+        stage = getattr(planner, name)
+        assert isinstance(stage, Stage) and stage.episode is fresh and set(vars(stage)) <= {
+            "ctx", "solver", "front", "approach", "kind", "flap", "slide", "grasping"}
 
 
 def test_the_hinge_side_is_inferred_only_where_configured():
@@ -123,8 +185,8 @@ def test_the_hinge_side_is_inferred_only_where_configured():
     handle = HandleEstimate(centre=np.array([0.96, 0.15, 0.0]), orientation="vertical", kind="bar",
                             size=(0.015, 0.2), front_x=0.953, panel_x=1.0)
     obs = SimpleNamespace(instruction="door", depth=depth, camera_view=view)
-    on = Planner(solver=None, spec=None, config=PlannerConfig())
-    assert on.hinge_side(handle, obs) == "right"
-    off = Planner(solver=None, spec=None, config=PlannerConfig().override({"grasp.infer_hinge": False}))
-    assert off.hinge_side(handle, obs) is None
-    assert off.hinge_side(handle, SimpleNamespace(instruction="left door", depth=depth, camera_view=view)) == "left"
+    on = Planner(solver=None, hand=None, config=PlannerConfig())
+    assert on.grasping.hinge_side(handle, obs) == "right"
+    off = Planner(solver=None, hand=None, config=PlannerConfig().override({"grasp.infer_hinge": False}))
+    assert off.grasping.hinge_side(handle, obs) is None
+    assert off.grasping.hinge_side(handle, SimpleNamespace(instruction="left door", depth=depth, camera_view=view)) == "left"

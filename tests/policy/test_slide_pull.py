@@ -92,11 +92,11 @@ def test_a_drawer_that_does_not_come_out_is_slid_along_its_front(axis):
     g = GraspChoice("hook", "vertical", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     state = PullState(quat0=quat)
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    assert planner.pull(part, g, False, state, result) == "stuck"
+    assert planner.pulling.pull(part, g, False, state, result) == "stuck"
     tried = []
-    while part.opening < 0.9 * part.travel and planner.next_slide(state, result):
+    while part.opening < 0.9 * part.travel and planner.slide.next_slide(state, result):
         tried.append(state.direction[1])
-        planner.pull(part, g, False, state, result)
+        planner.pulling.pull(part, g, False, state, result)
     assert tried[0] == 1.0  # toward the panel's body first
     assert part.opening >= 0.95 * part.travel, result.events
     assert tried == ([1.0] if axis[1] > 0 else [1.0, -1.0])
@@ -110,5 +110,5 @@ def test_a_drawer_that_comes_out_is_not_slid():
     g = GraspChoice("hook", "vertical", quat, part.site_pos(), np.zeros(16), np.zeros(16))
     state = PullState(quat0=quat)
     result = PlanResult(stage_reached="pull", failed_stage=None)
-    assert planner.pull(part, g, False, state, result) == "done"
+    assert planner.pulling.pull(part, g, False, state, result) == "done"
     assert part.opening >= 0.95 * part.travel and state.slides is None

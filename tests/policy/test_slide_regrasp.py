@@ -31,7 +31,7 @@ def _planner_and_grasp(h, hand: str):
     shape = planner.perceive(handle, box, obs, result)
     planner.state.handle = handle
     planner.state.first = obs
-    return planner, handle, shape, planner.choose_grasp(handle, shape, obs, result), result
+    return planner, handle, shape, planner.grasping.choose_grasp(handle, shape, obs, result), result
 
 
 @pytest.mark.parametrize("slide_y", [1.0, -1.0])
@@ -48,8 +48,8 @@ def test_a_panel_is_grasped_again_at_its_handle_with_the_fingers_against_the_sli
     # drawn a little sideways): the handle is as deep as it was seen, where it was last held across
     state.last_held = (g.pos + np.array([-0.07, 0.01, 0.0]), g.quat)
     state.slides = [np.array([0.0, slide_y, 0.0]), np.array([0.0, -slide_y, 0.0])]
-    assert planner.next_slide(state, result)
-    again = planner.next_grasp(g, handle, shape, state, result)
+    assert planner.slide.next_slide(state, result)
+    again = planner.grasping.next_grasp(g, handle, shape, state, result)
     new_fingers = quat_to_mat(again.quat)[:, 1]
     assert new_fingers[1] * slide_y < -0.99  # the fingers point against the slide
     assert np.allclose(quat_to_mat(again.quat)[:, 2], quat_to_mat(g.quat)[:, 2])  # same approach axis
@@ -70,7 +70,7 @@ def test_a_drawer_that_came_out_is_grasped_again_where_it_was_last_held(grasp_sc
     planner, handle, shape, g, result = _planner_and_grasp(grasp_scenes, "allegro")
     state = PullState(quat0=g.quat)
     state.last_held = (g.pos + np.array([-0.07, 0.0, 0.0]), g.quat)
-    again = planner.next_grasp(g, handle, shape, state, result)
+    again = planner.grasping.next_grasp(g, handle, shape, state, result)
     assert again.pos[0] == pytest.approx(g.pos[0] - 0.07 + planner.config.recovery.regrasp_deeper, abs=1e-9)
     assert np.allclose(again.quat, g.quat)
 
@@ -81,8 +81,8 @@ def test_the_gripper_is_never_turned_for_a_slide(grasp_scenes):
     planner, handle, shape, g, result = _planner_and_grasp(grasp_scenes, "franka")
     state = PullState(quat0=g.quat)
     state.slides = [np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0])]
-    planner.next_slide(state, result)
-    again = planner.next_grasp(g, handle, shape, state, result)
+    planner.slide.next_slide(state, result)
+    again = planner.grasping.next_grasp(g, handle, shape, state, result)
     assert np.allclose(again.quat, g.quat)
     assert not any("slide_fingers_turned" in e for e in result.events)
 

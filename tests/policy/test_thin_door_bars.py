@@ -49,13 +49,12 @@ def test_the_allegro_hooks_a_bar_at_its_fingers_middle_segments(grasp_scenes):
     bar sits at the middle segments; a hand without a slide grasps at the bar."""
     import numpy as np
 
-    from opend_mj.policy.planner import HandPlannerConfig
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.sim.hands import get_hand
     from opend_mj.transforms import quat_to_mat
 
-    slide = HandPlannerConfig.for_hand(load_spec("allegro")).hook_slide
+    slide = get_hand("allegro").planner.hook_slide
     assert 0.02 <= slide <= 0.06
-    assert HandPlannerConfig.for_hand(load_spec("franka")).hook_slide == 0.0
+    assert get_hand("franka").planner.hook_slide == 0.0
     # a synthetic bar 40 cm up (no low-handle rules), 12 mm thick with 25 mm behind it
     helpers = grasp_scenes
     bar, posts = helpers._bar(thickness=0.012, gap=0.025, length=0.2, z=0.4)

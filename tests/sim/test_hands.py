@@ -14,7 +14,8 @@ import pytest
 from dm_control import mjcf
 
 from opend_mj import transforms
-from opend_mj.sim import hand_scene, hands
+from opend_mj.sim import hands
+from opend_mj.sim.hands import scene as hand_scene
 
 EXPECTED_DOF = {"franka": 2, "allegro": 16, "shadow": 20, "skeleton": 20}
 

@@ -175,8 +175,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     job's `scene_key` to reuse (as `opend run` reuses them), else one is made."""
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
     from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle
-    from opend_mj.policy.planner import GraspProfile, Observation, Planner, PlannerConfig, Robot
-    from opend_mj.policy.solvers import get_solver, needs_ground_truth
+    from opend_mj.policy.factory import build_planner
+    from opend_mj.policy.planner import Observation, Robot
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.envs import ActionAdapter, SceneReader, instruction_onehot
 
@@ -192,22 +192,13 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
         with RGBDCamera(physics, "front", size, size) as cam:
             rgb, depth = cam.render()
             view = task.camera_view(physics)
-            options = {}
-            if needs_ground_truth(job.solver):
-                options["ground_truth"] = lambda: task.handle_boxes(physics)[task.target.joint]
-            solver = get_solver(job.solver, **options)
-            pconfig = PlannerConfig(pull=job.pull)
-            grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
-            if grasp is not None:
-                pconfig = grasp.apply(pconfig)
-            percept = perceive_handle(solver, rgb, depth, task.instruction, view, pconfig)
+            planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
+                                    ground_truth=lambda: task.handle_boxes(physics)[task.target.joint])
+            percept = perceive_handle(planner.solver, rgb, depth, task.instruction, view, planner.config)
             adapter = ActionAdapter(job.hand, task.config)
             noise = NoiseProcess(config.noise, adapter.finger_low, adapter.finger_high, task.control_timestep,
                                  noise_seed(job)) if config.noise.active else None
             rec = _RecordingEnv(env, reader, adapter, extra_cam, noise)
-            planner = Planner(solver, task.hand.spec, pconfig, grasp=None)
-            if grasp is not None:
-                planner.grasp = grasp
             robot = Robot(rec, look=lambda: cam.render()[1])
             diverged = None
             try:

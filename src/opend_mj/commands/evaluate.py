@@ -261,7 +261,7 @@ def report(results_dir, out, readme, no_readme):
 @click.option("--workers", type=int, default=1, show_default=True)
 @click.option("--save/--no-save", default=True, show_default=True)
 def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
-    """Search finger closing and grasp depth on the first training cabinets; save hands/<hand>/grasp.json."""
+    """Search finger closing and grasp depth on the first training cabinets; save the hand's grasp.json."""
     from opend_mj.evaluation.grasp_search import search_grasp as _search
 
     profile = _search(hand, cabinets_dir, n_cabinets=n_cabinets,
@@ -269,7 +269,9 @@ def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
                       depths=[float(x) for x in depths.split(",")], workers=workers)
     click.echo(f"chosen: close_scale={profile.close_scale} grasp_depth={profile.grasp_depth}")
     if save:
-        click.echo(f"saved {profile.save()}")
+        from opend_mj.sim.hands import get_hand
+
+        click.echo(f"saved {profile.save(get_hand(hand).grasp_file)}")
 
 
 @click.command("evaluate-solver")

@@ -19,7 +19,7 @@ import click
 def render_hand(name: str, out: str, pose: str, width: int, height: int) -> None:
     """Render hand NAME (franka, allegro, shadow, skeleton or a registered one) to a PNG."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from opend_mj.sim import hand_scene
+    from opend_mj.sim.hands import scene as hand_scene
 
     path = hand_scene.render_hand(name, out, width=width, height=height, pose=pose)
     click.echo(str(path))

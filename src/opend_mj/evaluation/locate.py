@@ -95,12 +95,11 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
     from tqdm import tqdm
 
     from opend_mj.policy.perception import refine_box_with_depth, snaps_to_depth
-    from opend_mj.policy.solvers import get_solver, needs_ground_truth
+    from opend_mj.policy.factory import build_solver
 
     jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit)
     state: dict = {}
-    options = {"ground_truth": lambda: state["boxes"][state["joint"]]} if needs_ground_truth(solver_name) else {}
-    solver = get_solver(solver_name, **options)
+    solver = build_solver(solver_name, ground_truth=lambda: state["boxes"][state["joint"]])
     records: list[LocateRecord] = []
     bar = tqdm(total=len(jobs), desc=f"locate ({solver_name})", unit="target", disable=not progress,
                dynamic_ncols=True)

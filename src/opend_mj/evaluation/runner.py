@@ -167,15 +167,8 @@ def _run_episode(job: EpisodeJob, env=None) -> dict:
 
 
 def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
-    from opend_mj.policy.planner import (
-        GraspProfile,
-        Observation,
-        Planner,
-        PlannerConfig,
-        Robot,
-    )
-    from opend_mj.policy.solvers import get_solver, needs_ground_truth
-    from opend_mj.sim.hands import load_spec
+    from opend_mj.policy.factory import build_planner
+    from opend_mj.policy.planner import Observation, Robot
 
     task = env.task
     config = task.config
@@ -186,11 +179,6 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     rgb, depth = cam.render()  # the one observation
     view = task.camera_view(physics)
     gt_box = task.handle_boxes(physics)[target.joint]
-
-    options = {}
-    if needs_ground_truth(job.solver):
-        options["ground_truth"] = lambda: task.handle_boxes(physics)[target.joint]
-    solver = get_solver(job.solver, **options)
 
     # ground-truth probes for labelling only
     probes: dict = {}
@@ -222,17 +210,9 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
             video.capture()
 
     robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: cam.render()[1])
-    overrides = dict(job.planner_overrides)
-    pconfig = PlannerConfig(pull=job.pull)
-    grasp = GraspProfile.load(job.hand) if job.use_grasp_file else None
-    if grasp is not None:
-        pconfig = grasp.apply(pconfig)
-    if overrides:
-        pconfig = pconfig.override(overrides)
-        grasp = None if "grasp.close_scale" in overrides or "grasp.depth" in overrides else grasp
-    planner = Planner(solver, load_spec(job.hand), pconfig, grasp=None, on_stage=on_stage)
-    if grasp is not None:
-        planner.grasp = grasp  # knob orientation
+    planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
+                            overrides=job.planner_overrides,
+                            ground_truth=lambda: task.handle_boxes(physics)[target.joint], on_stage=on_stage)
     warnings = task.physics_warnings  # the list of this episode (a reset would make a new one)
     try:
         plan = planner.run(robot, Observation(rgb=rgb, depth=depth, instruction=instruction, camera_view=view))

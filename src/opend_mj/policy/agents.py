@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import queue
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -151,13 +151,13 @@ class PlannerAgent:
     def __init__(self, solver: Any = "cliport", pull: str = "arc", use_grasp_file: bool = True,
                  name: str | None = None, **solver_options):
         if isinstance(solver, str):
-            from opend_mj.policy.solvers import needs_ground_truth, solver_factory
+            from opend_mj.policy.factory import build_solver
+            from opend_mj.policy.solvers import needs_ground_truth
 
             if needs_ground_truth(solver):
-                raise ValueError(f"solver {solver!r} reads the simulator's ground truth, which an agent may not; "
-                                 f"run it with `opend run --solver {solver}`")
+                build_solver(solver, for_agent=True)  # refused, with the reason
             self._solver_name, self._solver = solver, None
-            self._factory = lambda: solver_factory(solver)(**solver_options)
+            self._factory = lambda: build_solver(solver, for_agent=True, **solver_options)
         else:
             self._solver_name, self._solver = getattr(solver, "name", type(solver).__name__), solver
         self.pull = pull
@@ -173,16 +173,10 @@ class PlannerAgent:
         return self._solver
 
     def reset(self, episode: EpisodeInfo) -> None:
-        from opend_mj.policy.planner import GraspProfile, Planner, PlannerConfig
+        from opend_mj.policy.factory import build_planner
 
         self._stop_thread()
-        config = PlannerConfig(pull=self.pull)
-        grasp = GraspProfile.load(episode.hand) if self.use_grasp_file else None
-        if grasp is not None:
-            config = grasp.apply(config)
-        self._planner = Planner(self.solver, episode.hand_spec, replace(config), grasp=None)
-        if grasp is not None:
-            self._planner.grasp = grasp  # knob orientation (as `opend run` sets it)
+        self._planner = build_planner(self.solver, episode.hand, pull=self.pull, use_grasp_file=self.use_grasp_file)
         self._episode = episode
         self.result = None
 

@@ -14,12 +14,17 @@ their handle's circle: about the hinge seen in depth (``DoorConfig.hinge_pull``)
 seen, else along the direction the handle is observed to move; the hand's yaw turns with the
 pull so that the grip does not twist (:mod:`.pull`).
 
-Modules: :mod:`.config` (the configuration), :mod:`.hand` (per-hand files), :mod:`.records`,
-:mod:`.robot` (the environment adapter), :mod:`.loop` (the stage loop, :class:`Planner`),
-:mod:`.grasp` (grasp geometry), :mod:`.approach` (approach, close, verify), :mod:`.pull`,
-:mod:`.kind` (the kind check), :mod:`.recovery` (push recovery).
+Modules: :mod:`.config` (the configuration, one section per stage), :mod:`.records` (what the
+planner sees, chooses and keeps), :mod:`.robot` (the environment adapter), :mod:`.stage` (what
+every stage is given), :mod:`.loop` (:class:`Planner`: the short loop over the stages), the stages
+:mod:`.grasp` (:class:`Grasping`), :mod:`.approach` (:class:`Approach`: approach, close, verify),
+:mod:`.pull` (:class:`Pulling`) with :mod:`.flap` and :mod:`.slide` (its variants), :mod:`.kind`
+(:class:`KindCheck`, :class:`FrontWatch`), :mod:`.recovery` (:class:`PushRecovery`), and the
+helpers :mod:`.moves` and :mod:`.clearance`. A hand's own numbers (``planner.json``,
+``grasp.json``) come with its :class:`~opend_mj.sim.hands.HandModel`.
 """
 
+from opend_mj.policy.planner.approach import Approach
 from opend_mj.policy.planner.config import (
     ApproachConfig,
     DoorConfig,
@@ -31,8 +36,11 @@ from opend_mj.policy.planner.config import (
     RecoveryConfig,
     VerifyConfig,
 )
-from opend_mj.policy.planner.hand import GRASP_FILE, PLANNER_FILE, GraspProfile, HandPlannerConfig
+from opend_mj.policy.planner.flap import FlapSteering
+from opend_mj.policy.planner.grasp import Grasping
+from opend_mj.policy.planner.kind import FrontWatch, KindCheck
 from opend_mj.policy.planner.loop import Planner
+from opend_mj.policy.planner.pull import Pulling
 from opend_mj.policy.planner.records import (
     STAGES,
     EpisodeState,
@@ -41,12 +49,16 @@ from opend_mj.policy.planner.records import (
     PlanResult,
     PullState,
 )
-from opend_mj.policy.planner.recovery import fit_circle_xy
+from opend_mj.policy.planner.recovery import PushRecovery, fit_circle_xy
 from opend_mj.policy.planner.robot import Robot
+from opend_mj.policy.planner.slide import PanelSliding
+from opend_mj.policy.planner.stage import Stage, StageContext
+from opend_mj.sim.hands import GRASP_FILE, PLANNER_FILE, GraspProfile, HandPlannerConfig
 
 __all__ = [
-    "GRASP_FILE", "PLANNER_FILE", "STAGES", "ApproachConfig", "DoorConfig", "EpisodeState", "GraspChoice",
-    "GraspConfig", "GraspProfile", "HandPlannerConfig", "KindConfig", "LocateConfig", "Observation",
-    "PlanResult", "Planner", "PlannerConfig", "PullConfig", "PullState", "RecoveryConfig", "Robot",
-    "VerifyConfig", "fit_circle_xy",
+    "GRASP_FILE", "PLANNER_FILE", "STAGES", "Approach", "ApproachConfig", "DoorConfig", "EpisodeState",
+    "FlapSteering", "FrontWatch", "GraspChoice", "GraspConfig", "GraspProfile", "Grasping", "HandPlannerConfig",
+    "KindCheck", "KindConfig", "LocateConfig", "Observation", "PanelSliding", "PlanResult", "Planner",
+    "PlannerConfig", "PullConfig", "PullState", "Pulling", "PushRecovery", "RecoveryConfig", "Robot", "Stage",
+    "StageContext", "VerifyConfig", "fit_circle_xy",
 ]

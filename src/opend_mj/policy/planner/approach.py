@@ -9,12 +9,15 @@ import numpy as np
 
 from opend_mj.policy.planner.moves import hold, kept_down, move, pressed
 from opend_mj.policy.planner.records import GraspChoice, PlanResult
+from opend_mj.policy.planner.stage import Stage
 from opend_mj.transforms import quat_axis_z
 
 
-class ApproachAndClose:
-    """The approach and grasp stages of :class:`~opend_mj.policy.planner.Planner` (uses its
-    ``config``, ``spec``, ``hand``, ``state`` and :meth:`_stage`)."""
+class Approach(Stage):
+    """The approach and the grasp's close: the open hand in to the grasp chosen by
+    :class:`~opend_mj.policy.planner.grasp.Grasping`, the fingers closed and the hold checked by
+    touch (``config.approach``, ``config.grasp``, ``config.verify``; the hand's ``hold_parts``), and
+    the hand backed off again (``config.recovery``)."""
 
     def holding(self, robot) -> tuple[bool, dict]:
         """Whether the hand holds something, from touch: at least the hand's ``hold_parts`` parts
@@ -33,7 +36,7 @@ class ApproachAndClose:
             target = target + np.asarray(cfg.first_grasp_offset, float)
         axis = g.axis
         pre_pos = target - cfg.pregrasp_distance * axis
-        self._stage(result, "approach", site_target=target.tolist(), attempt=g.attempt)
+        self.ctx.enter(result, "approach", site_target=target.tolist(), attempt=g.attempt)
         site0, _ = robot.site_pose()
         hold(robot, site0, g.quat, g.pre, cfg.first_wait if first else cfg.again_wait)
         if first:  # move at the start depth, then to the pre-grasp
@@ -48,15 +51,15 @@ class ApproachAndClose:
         err = float(np.linalg.norm(robot.site_pos() - target))
         if err > cfg.blocked_error:  # blocked on the way in (the hand's own state says so)
             result.events.append({"approach_error": round(err, 4)})
-        self.state.approach_target = target
+        self.episode.approach_target = target
         return err
 
     def close_and_verify(self, robot, g: GraspChoice, result: PlanResult) -> bool:
         """Close the fingers, then pull a little: a held handle pushes back on the fingers (the touch
         sensors' load rises); a hand that closed on air or on the panel feels nothing more."""
         cfg = self.config.verify
-        self._stage(result, "grasp", attempt=g.attempt)
-        target = self.state.approach_target
+        self.ctx.enter(result, "grasp", attempt=g.attempt)
+        target = self.episode.approach_target
         grasp = self.config.grasp
         close_time = grasp.close_time if grasp.close_time is not None else self.spec.close_time
         n = max(1, int(round(close_time / robot.control_dt)))
@@ -76,7 +79,7 @@ class ApproachAndClose:
         held = False
         for i in range(1, n + 1):
             step = start + back * cfg.probe_distance * i / n
-            if g.press:  # a hook from above stays down on the bar (:meth:`Pulling._advance`)
+            if g.press:  # a hook from above stays down on the bar (the pull does the same)
                 step = kept_down(robot, step, g.press, float(g.pos[2]))
             robot.step(step, g.quat, g.closed)
             if cfg.probe_distance * i / n >= cfg.probe_min:

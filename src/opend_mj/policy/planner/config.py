@@ -2,7 +2,7 @@
 
 Units: metres, seconds, degrees (names ending ``_deg``), newtons; speeds in m/s. Numbers that
 differ from hand to hand live with each hand (``hands/<name>/planner.json``,
-:class:`~opend_mj.policy.planner.hand.HandPlannerConfig`); perception's thresholds in
+:class:`~opend_mj.sim.hands.HandPlannerConfig`); perception's thresholds in
 :class:`~opend_mj.policy.perception.PerceptionConfig`.
 """
 
@@ -58,6 +58,8 @@ class GraspConfig:
     #: how far the fingers close: fraction of the way from the pre-grasp to the grasp profile of the
     #: hand spec (1: the spec's profile); a hand's ``grasp.json`` sets it
     close_scale: float = 1.0
+    #: the finger orientation for knobs ("horizontal" | "vertical"); a hand's ``grasp.json`` sets it
+    knob_orientation: str = "horizontal"
     #: seconds to close the fingers (None: the hand spec's ``close_time``), then to let them settle
     close_time: float | None = None
     settle_time: float = 0.3

@@ -23,33 +23,39 @@ import math
 import numpy as np
 
 from opend_mj.policy.perception import door_edges_vertical
+from opend_mj.policy.planner.moves import yawed
 from opend_mj.policy.planner.records import Flap, PlanResult, PullState
+from opend_mj.policy.planner.stage import Stage, StageContext
 
 
-class FlapSteering:
-    """Flap detection and steering for :class:`~opend_mj.policy.planner.pull.Pulling` (uses the
-    planner's ``config.door``, ``state`` (the handle and the first observation), ``_yawed`` and
-    :meth:`~opend_mj.policy.planner.kind.KindCheck.front_seen`)."""
+class FlapSteering(Stage):
+    """The flap variant of a door's pull: a flap seen by the held path or by the camera
+    (``front``), and the pull along its circle (``config.door``; the hand's
+    ``flap_min_radius_share``)."""
 
-    def _front_edges_z(self, state: PullState):
+    def __init__(self, ctx: StageContext, front):
+        super().__init__(ctx)
+        self.front = front
+
+    def front_edges_z(self, state: PullState):
         """World z of the front's top and bottom edges above and below the handle (cached per pull
         state; None where unseen)."""
         if state.front_z is None:
-            handle, first = self.state.handle, self.state.first
+            handle, first = self.episode.handle, self.episode.first
             edges = None
             if handle is not None and first is not None and first.depth is not None:
                 edges = door_edges_vertical(handle, first.depth, first.camera_view, self.config.perception)
             state.front_z = edges if edges is not None else ()
         return state.front_z or None
 
-    def _flap_seen(self, state: PullState, result: PlanResult) -> Flap | None:
+    def seen(self, state: PullState, result: PlanResult) -> Flap | None:
         """A flap where the held path rises or sinks ``flap_min_rise`` (m) or more, within a factor
         ``flap_rise_ratio`` of what a circle about the front's far edge (above for a rising handle,
         below for a sinking one) predicts for the horizontal distance it came out, and came out
         straight (its chord turned at most ``flap_max_turn_deg`` from the pull's start direction);
         None otherwise, and never for a vertical bar."""
         cfg = self.config.door
-        handle = self.state.handle
+        handle = self.episode.handle
         if len(state.track) < 2 or (handle is not None and handle.kind == "bar" and handle.orientation == "vertical"):
             return None  # a hand slides up and down a vertical bar: its rise is not the part's
         p0, p = np.asarray(state.track[0], float), np.asarray(state.track[-1], float)
@@ -62,7 +68,7 @@ class FlapSteering:
         chord_turn = abs(math.degrees(math.atan2(base[0] * out[1] - base[1] * out[0], float(base[:2] @ out))))
         if chord_turn > cfg.flap_max_turn_deg:
             return None  # the handle came out turning about a vertical axis: a side door's
-        edges = self._front_edges_z(state)
+        edges = self.front_edges_z(state)
         if edges is None:
             return None
         sign = 1.0 if dz > 0 else -1.0
@@ -81,7 +87,7 @@ class FlapSteering:
         state.hinge = None  # a side door's hinge line seen in depth is not this part's
         return flap
 
-    def _flap_looked(self, robot, site, run, state: PullState, result: PlanResult) -> Flap | None:
+    def looked(self, robot, site, run, state: PullState, result: PlanResult) -> Flap | None:
         """A flap seen by the camera, for a hand that holds too loosely to record a held path: once
         per pull state at each of ``flap_look_distances`` (m) the site came out (a tall flap has
         turned less at the same distance than a short one), a new depth image shows
@@ -89,16 +95,16 @@ class FlapSteering:
         shift's slope up the front at least ``flap_front_slope``, across it at most half that): a
         flap hinged at its top edge where the lower part came out more, else at its bottom edge."""
         cfg = self.config.door
-        handle = self.state.handle
+        handle = self.episode.handle
         looks = cfg.flap_look_distances
         if state.flap_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.flap_looked] \
                 or (handle is not None and handle.kind == "bar" and handle.orientation == "vertical"):
             return None
         state.flap_looked += 1
-        front = self.front_seen(robot, site)
+        front = self.front.seen(robot, site)
         if front is None or abs(front["up"]) < cfg.flap_front_slope or abs(front["across"]) > abs(front["up"]) / 2:
             return None
-        edges = self._front_edges_z(state)
+        edges = self.front_edges_z(state)
         if edges is None:
             return None
         start = np.asarray(run.start, float)
@@ -113,7 +119,7 @@ class FlapSteering:
         state.hinge = None
         return Flap(start=start, out=np.array([out[0], out[1], 0.0]) / dh, sign=sign, reach=reach)
 
-    def _flap_radius(self, flap: Flap, state: PullState) -> float:
+    def radius(self, flap: Flap, state: PullState) -> float:
         """The flap's radius: the held path's circle through its start, tangent to the front there
         (least squares), within ``flap_min_radius_share`` x the far edge's reach and the reach (the
         hand's own share where its ``planner.json`` sets one)."""
@@ -131,11 +137,11 @@ class FlapSteering:
         fit = float(((u * u + w * w) * w).sum()) / den
         return float(np.clip(fit, share * flap.reach, flap.reach))
 
-    def _steer_flap(self, site, run, state: PullState) -> None:
+    def steer(self, site, run, state: PullState) -> None:
         """Pull along the flap's circle: the opening tangent at the site, the hand pitched by the
         flap's angle (``state.tilt``, deg, rising positive)."""
         flap = state.flap
-        radius = self._flap_radius(flap, state)
+        radius = self.radius(flap, state)
         centre = flap.start + np.array([0.0, 0.0, flap.sign * radius])
         d = site - centre
         u = float(d[:2] @ flap.out[:2])
@@ -145,4 +151,4 @@ class FlapSteering:
         state.direction = t_u * flap.out + np.array([0.0, 0.0, t_w])
         state.tilt = math.degrees(math.atan2(t_w, t_u))
         state.peak_tilt = state.tilt if abs(state.tilt) > abs(state.peak_tilt) else state.peak_tilt
-        run.quat = self._yawed(state, state.turned, state.tilt)
+        run.quat = yawed(self.config.door, state, state.turned, state.tilt)

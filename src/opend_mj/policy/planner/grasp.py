@@ -16,9 +16,22 @@ import numpy as np
 from opend_mj.language import hinge_side
 from opend_mj.policy.perception import door_edges, infer_hinge_side
 from opend_mj.policy.planner.clearance import clearances, outline_for
-from opend_mj.policy.planner.records import GraspChoice, Observation, PlanResult, PullState
+from opend_mj.policy.planner.records import (
+    GraspChoice,
+    Observation,
+    PlanResult,
+    PullState,
+)
+from opend_mj.policy.planner.stage import Stage
 from opend_mj.sim.hands import orientation_for_handle
-from opend_mj.transforms import axis_angle_quat, quat_axis_z, quat_mul, quat_to_mat, yaw_quat
+from opend_mj.transforms import (
+    axis_angle_quat,
+    quat_axis_z,
+    quat_mul,
+    quat_to_mat,
+    yaw_quat,
+)
+
 
 class _Events:
     """Where a pose's events go: a PlanResult's list, or a list that is dropped."""
@@ -29,13 +42,14 @@ class _Events:
 
 #: the grasp-depth key of each style (``GraspConfig.depth[style]`` wins where it has one)
 STYLE_KIND = {"hook": "bar", "pinch": "bar", "wrap": "knob", "hook_down": "bar", "press_down": "bar"}
-#: styles that come down on a low bar from above (:meth:`GraspGeometry.hook_down_pose`)
+#: styles that come down on a low bar from above (:meth:`Grasping.hook_down_pose`)
 FROM_ABOVE = ("hook_down", "press_down")
 
 
-class GraspGeometry:
-    """Grasp choice of :class:`~opend_mj.policy.planner.Planner` (uses its ``config.grasp``,
-    ``spec``, ``hand``, ``grasp`` (the hand's grasp profile) and ``state``)."""
+class Grasping(Stage):
+    """The grasp choice: where and how the hand grasps the located handle, and where it grasps again
+    after a lost grip (``config.grasp``, ``config.recovery``; the hand's numbers). Keeps the hinge
+    seen in depth and the first grasp's site in the episode's state."""
 
     def closed_profile(self, orientation: str) -> np.ndarray:
         """Finger targets when closed: ``close_scale`` of the way from the pre-grasp to the spec's grasp."""
@@ -52,9 +66,9 @@ class GraspGeometry:
         door = result.target_kind == "door"
         orientation = handle.orientation
         if handle.kind == "knob":
-            orientation = self.grasp.knob_orientation if self.grasp is not None else "horizontal"
+            orientation = self.config.grasp.knob_orientation
         side = self.hinge_side(handle, obs) if door else None
-        self.state.hinge = self.hinge_from_depth(handle, side, obs, result) if door else None
+        self.episode.hinge = self.hinge_from_depth(handle, side, obs, result) if door else None
         style = self.grasp_style(handle, shape)
         depth = float(cfg.depth.get(style, cfg.depth.get(STYLE_KIND[style], 0.0)))
         centre = handle.centre + np.array([depth, 0.0, 0.0])
@@ -100,7 +114,7 @@ class GraspGeometry:
                 result.events.append({"hook_slide": round(slide, 4)})
         closed = pre if style in FROM_ABOVE else self.closed_profile(orientation)
         grasp = GraspChoice(style, orientation, quat, pos, pre, closed, probe=probe, press=press)
-        self.state.first_pos = pos.copy()
+        self.episode.first_pos = pos.copy()
         result.events.append({"grasp": grasp.to_dict()})
         return grasp
 
@@ -304,7 +318,7 @@ class GraspGeometry:
         if g.style in FROM_ABOVE:  # from above again at the planned height (deeper is the floor): where
             # the bar was last held (a part that came out part way); a hook that never held found no
             # gap behind the bar (a solid profile seen as a bar): the fingers press on its top instead
-            pos = self.state.first_pos.copy()
+            pos = self.episode.first_pos.copy()
             style = g.style
             if state.last_held is not None:
                 pos[:2] = np.asarray(state.last_held[0], float)[:2]
@@ -319,12 +333,12 @@ class GraspGeometry:
                 # a panel that did not come out: its handle is as deep as it was seen (the touch last
                 # felt may be a hand sliding off it, cm out), across the approach where it was last
                 # held (a panel drawn a little along its front)
-                pos = pos + float((self.state.first_pos - pos) @ axis) * axis
+                pos = pos + float((self.episode.first_pos - pos) @ axis) * axis
             new = GraspChoice(g.style, g.orientation, quat, pos + deeper * axis, g.pre, g.closed, g.attempt + 1)
         else:  # nothing held yet: the bar may be nearer or farther than seen; try nearer, then farther
             steps = cfg.regrasp_offsets
             shift = steps[min(g.attempt, len(steps) - 1)]
-            new = GraspChoice(g.style, g.orientation, g.quat, self.state.first_pos + shift * g.axis, g.pre,
+            new = GraspChoice(g.style, g.orientation, g.quat, self.episode.first_pos + shift * g.axis, g.pre,
                               g.closed, g.attempt + 1)
         if turn:
             new = self._turned_for_slide(new, state.direction, result)

@@ -17,11 +17,38 @@ from opend_mj.policy.perception import front_motion
 from opend_mj.policy.planner.moves import move
 from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
 from opend_mj.policy.planner.robot import new_depth
+from opend_mj.policy.planner.stage import Stage, StageContext
 
 
-class KindCheck:
-    """The kind check of :class:`~opend_mj.policy.planner.Planner` (uses its ``config.kind``,
-    ``solver``, ``state`` and :meth:`back_off`)."""
+class FrontWatch(Stage):
+    """The camera looking again mid-pull: how the pulled handle's front moved since the episode's
+    first image (``config.perception.front``). Read by the kind check, the door's and the flap's
+    pull and the push recovery."""
+
+    def seen(self, robot, site) -> dict | None:
+        """How the pulled handle's front moved since the first image (:func:`front_motion`), where
+        the robot can look again."""
+        handle, first = self.episode.handle, self.episode.first
+        if handle is None or first is None or first.depth is None:
+            return None
+        depth = new_depth(robot)
+        if depth is None:
+            return None
+        seen = front_motion(first.depth, depth, first.camera_view, handle.centre, handle.panel_x, site,
+                            self.config.perception.front)
+        return None if seen is None else {k: round(v, 4) if isinstance(v, float) else v for k, v in seen.items()}
+
+
+class KindCheck(Stage):
+    """The kind check (``config.kind``): is the held handle the kind the instruction names? Asks
+    the ``solver`` again only where it can be asked (:meth:`checks_kind`); gives a wrong handle back
+    through ``approach`` (:meth:`~opend_mj.policy.planner.approach.Approach.back_off`)."""
+
+    def __init__(self, ctx: StageContext, solver, front: FrontWatch, approach):
+        super().__init__(ctx)
+        self.solver = solver
+        self.front = front
+        self.approach = approach
 
     def checks_kind(self) -> bool:
         """Whether pulls watch the handle's kind: a learned solver that can be asked again."""
@@ -63,7 +90,7 @@ class KindCheck:
         if turn is None:
             return None
         result.events.append({"kind_seen": seen, "turn_deg": round(turn, 2), "tilt_deg": round(tilt, 2)})
-        front = self.front_seen(robot, site)
+        front = self.front.seen(robot, site)
         front_kind = self.kind_from_front(front)
         if front is not None:
             result.events.append({"front_seen": front, "front_kind": front_kind})
@@ -100,19 +127,6 @@ class KindCheck:
             return "drawer"
         return None
 
-    def front_seen(self, robot, site) -> dict | None:
-        """How the pulled handle's front moved since the first image (:func:`front_motion`), where
-        the robot can look again."""
-        handle, first = self.state.handle, self.state.first
-        if handle is None or first is None or first.depth is None:
-            return None
-        depth = new_depth(robot)
-        if depth is None:
-            return None
-        seen = front_motion(first.depth, depth, first.camera_view, handle.centre, handle.panel_x, site,
-                            self.config.perception.front)
-        return None if seen is None else {k: round(v, 4) if isinstance(v, float) else v for k, v in seen.items()}
-
     def push_back(self, robot, g: GraspChoice, state: PullState) -> None:
         """Take a wrong handle back along the path it came (still held), then let go and back off:
         the part closes again (a drawer pulled as a door may stay a little out: the hand slid
@@ -122,4 +136,4 @@ class KindCheck:
         for a, b in zip(path[:-1], path[1:]):
             if float(np.linalg.norm(b - a)) > 1e-4:
                 move(robot, a, b, squat, g.closed, self.config.pulling.speed)
-        self.back_off(robot, g)
+        self.approach.back_off(robot, g)

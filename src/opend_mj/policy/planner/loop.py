@@ -8,8 +8,6 @@ import math
 from dataclasses import replace
 from typing import Callable
 
-import numpy as np
-
 from opend_mj.language import InstructionNotUnderstood, target_kind
 from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
@@ -19,17 +17,24 @@ from opend_mj.policy.perception import (
     refine_box_with_depth,
     snaps_to_depth,
 )
-from opend_mj.policy.planner.approach import ApproachAndClose
+from opend_mj.policy.planner.approach import Approach
 from opend_mj.policy.planner.config import PlannerConfig
-from opend_mj.policy.planner.grasp import GraspGeometry
-from opend_mj.policy.planner.hand import GraspProfile, HandPlannerConfig
-from opend_mj.policy.planner.kind import KindCheck
+from opend_mj.policy.planner.flap import FlapSteering
+from opend_mj.policy.planner.grasp import Grasping
+from opend_mj.policy.planner.kind import FrontWatch, KindCheck
 from opend_mj.policy.planner.moves import hold, move
 from opend_mj.policy.planner.pull import Pulling
-from opend_mj.policy.planner.records import EpisodeState, Observation, PlanResult, PullState
+from opend_mj.policy.planner.records import (
+    EpisodeState,
+    Observation,
+    PlanResult,
+    PullState,
+)
 from opend_mj.policy.planner.recovery import PushRecovery
 from opend_mj.policy.planner.robot import new_depth
-from opend_mj.sim.hands import HandSpec
+from opend_mj.policy.planner.slide import PanelSliding
+from opend_mj.policy.planner.stage import StageContext
+from opend_mj.sim.hands import HandModel, HandPlannerConfig, HandSpec, get_hand
 from opend_mj.transforms import quat_axis_z
 
 #: After a finished pull with ``release``: the fingers stay closed, then open, for these times
@@ -39,6 +44,17 @@ RELEASE_OPEN = 0.4
 RELEASE_BACKOFF = 0.08
 #: A grip never held beyond this much pull travel (m) is the grasp's failure, not the pull's.
 GRASP_FAILED_TRAVEL = 0.03
+
+
+def _registered_numbers(spec: HandSpec | None) -> HandPlannerConfig:
+    """The planner's numbers of the registered hand ``spec`` names, else the defaults of its type
+    (None: the defaults)."""
+    if spec is None:
+        return HandPlannerConfig()
+    try:
+        return get_hand(spec.name).planner
+    except KeyError:
+        return HandPlannerConfig.for_type(spec.hand_type)
 
 
 def settle_box(solver, box, depth, view, config) -> tuple:
@@ -57,40 +73,74 @@ def settle_box(solver, box, depth, view, config) -> tuple:
     return box, events
 
 
-class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery):
-    """Deterministic open-the-handle controller around a handle solver.
+class Planner:
+    """Deterministic open-the-handle controller around a handle solver: a short loop over its stages.
 
-    Stages: :meth:`locate` (solver box -> 3D handle), :meth:`perceive` (shape from depth),
-    :meth:`choose_grasp`, :meth:`approach`, :meth:`close_and_verify` (touch: does the hand hold?),
-    :meth:`pull` (until done or the grip slips); where the grip is lost, :meth:`back_off` and
-    :meth:`next_grasp`; a door that started to open and was lost is pushed open from inside
-    (:meth:`recover_door`). With a learned solver, a handle whose pull shows the other kind than
-    the instruction's is taken back, let go, and the solver asked again with what was seen
-    (:meth:`judge_kind`, :meth:`push_back`).
+    Stages (each an object over one :class:`~opend_mj.policy.planner.stage.StageContext`):
+    :meth:`locate` and :meth:`perceive` (here: solver box -> 3D handle -> shape from depth),
+    ``grasping`` (:class:`~.grasp.Grasping`: where and how to grasp, and again after a lost grip),
+    ``approach`` (:class:`~.approach.Approach`: in, close, verify by touch, back off), ``pulling``
+    (:class:`~.pull.Pulling`, with its ``flap`` and ``slide`` variants), ``kind``
+    (:class:`~.kind.KindCheck`: a handle whose pull shows the other kind than the instruction's is
+    taken back, let go, and the solver asked again), ``recovery`` (:class:`~.recovery.PushRecovery`:
+    a lost door pushed open from inside); ``front`` (:class:`~.kind.FrontWatch`) is the camera's
+    second look that several of them use.
 
-    ``hand``: the hand's planner numbers (default: ``hands/<spec.name>/planner.json``);
-    ``grasp``: the hand's grasp profile (``grasp.json``: finger closing, grasp depth, knobs)."""
+    ``hand``: the hand (a :class:`~opend_mj.sim.hands.HandModel`, or a bare
+    :class:`~opend_mj.sim.hands.HandSpec` whose registered hand supplies the planner's numbers);
+    ``config``: the planner's configuration as it will be used (the hand's grasp tuning already
+    applied: :func:`opend_mj.policy.factory.build_planner` does that); ``numbers``: the planner's
+    numbers for the hand, instead of the hand's own (``planner.json``); ``on_stage``: called with
+    (stage name, info) as each stage starts."""
 
-    def __init__(self, solver: HandleSolver, spec: HandSpec, config: PlannerConfig = PlannerConfig(),
-                 grasp: GraspProfile | None = None, on_stage: Callable[[str, dict], None] | None = None,
-                 hand: HandPlannerConfig | None = None):
+    def __init__(self, solver: HandleSolver, hand: HandModel | HandSpec | None, config: PlannerConfig = PlannerConfig(),
+                 *, numbers: HandPlannerConfig | None = None, on_stage: Callable[[str, dict], None] | None = None):
+        spec = hand.spec if isinstance(hand, HandModel) else hand
+        if numbers is None:
+            numbers = hand.planner if isinstance(hand, HandModel) else _registered_numbers(spec)
         self.solver = solver
-        self.spec = spec
-        self.grasp = grasp
-        self.config = grasp.apply(config) if grasp is not None else config
-        self.hand = hand if hand is not None else HandPlannerConfig.for_hand(spec)
-        self.on_stage = on_stage
-        self.state = EpisodeState()
+        self.ctx = StageContext(config=config, spec=spec, hand=numbers, on_stage=on_stage)
+        self.front = FrontWatch(self.ctx)
+        self.grasping = Grasping(self.ctx)
+        self.approach = Approach(self.ctx)
+        self.kind = KindCheck(self.ctx, solver, self.front, self.approach)
+        self.flap = FlapSteering(self.ctx, self.front)
+        self.slide = PanelSliding(self.ctx)
+        self.pulling = Pulling(self.ctx, self.approach, self.kind, self.front, self.flap, self.slide)
+        self.recovery = PushRecovery(self.ctx, self.grasping, self.front)
+
+    @property
+    def spec(self) -> HandSpec:
+        return self.ctx.spec
+
+    @property
+    def hand(self) -> HandPlannerConfig:
+        """The planner's numbers for the hand (``planner.json``)."""
+        return self.ctx.hand
+
+    @property
+    def config(self) -> PlannerConfig:
+        return self.ctx.config
+
+    @config.setter
+    def config(self, config: PlannerConfig) -> None:
+        self.ctx.config = config
+
+    @property
+    def state(self) -> EpisodeState:
+        """The state of the episode being run (every stage reads this one)."""
+        return self.ctx.episode
+
+    @state.setter
+    def state(self, state: EpisodeState) -> None:
+        self.ctx.episode = state
 
     # ---------------------------------------------------------------- helpers
     def _stage(self, result: PlanResult, name: str, **info) -> None:
-        result.stage_reached = name
-        result.events.append({"stage": name, **{k: v for k, v in info.items() if not isinstance(v, np.ndarray)}})
-        if self.on_stage is not None:
-            self.on_stage(name, info)
+        self.ctx.enter(result, name, **info)
 
     def _time_left(self, robot) -> float:
-        return self.config.max_time - robot.time
+        return self.ctx.time_left(robot)
 
     def _hold_until_min_time(self, robot, pose) -> None:
         """Keep ``pose`` (site position, orientation, fingers; None: where the hand is, open) until
@@ -131,7 +181,7 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             observed = observed + ((box.as_tuple(), seen),)
             result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
                                       "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
-            self.push_back(robot, grasp, state)
+            self.kind.push_back(robot, grasp, state)
             if len(observed) >= cfg.kind.max_target_tries or self._time_left(robot) < cfg.kind.retarget_time:
                 status = "not_held"
                 break
@@ -182,7 +232,7 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
         cfg = self.config
         self.state.handle = handle
         shape = self.perceive(handle, box, obs, result)
-        grasp = self.choose_grasp(handle, shape, obs, result)
+        grasp = self.grasping.choose_grasp(handle, shape, obs, result)
         door = result.target_kind == "door" and cfg.pull == "arc"
         state = PullState(quat0=grasp.quat)
         status = "not_held"
@@ -192,18 +242,18 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             grasp.attempt = attempt
             if attempt > 0:
                 result.regrasps += 1
-            self.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind)
-            if not self.close_and_verify(robot, grasp, result):
+            self.approach.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind)
+            if not self.approach.close_and_verify(robot, grasp, result):
                 status = "not_held"
-                self.back_off(robot, grasp)
-                grasp = self.next_grasp(grasp, handle, shape, state, result)
+                self.approach.back_off(robot, grasp)
+                grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
                 continue
-            status = self.pull(robot, grasp, door, state, result)
+            status = self.pulling.pull(robot, grasp, door, state, result)
             if status == "wrong_kind":
                 return status, state, grasp
             if status == "stuck":  # a drawer that did not come out: slide it along its front
                 status = "slipped"
-                if not self.next_slide(state, result):
+                if not self.slide.next_slide(state, result):
                     break
             if status == "slipped" and (state.swung() >= cfg.pulling.door_done_deg if door
                                         else state.travelled >= cfg.pulling.drawer_done):
@@ -211,14 +261,14 @@ class Planner(GraspGeometry, ApproachAndClose, Pulling, KindCheck, PushRecovery)
             if status == "done":
                 break
             if door and cfg.recovery.push_recovery:
-                arc = self.door_arc(state)
+                arc = self.recovery.door_arc(state)
                 if arc is not None and math.degrees(arc[4]) >= cfg.recovery.push_min_turn:
-                    self.back_off(robot, grasp)
+                    self.approach.back_off(robot, grasp)
                     break  # an opened door is pushed open from inside (below), not grasped again
-            self.back_off(robot, grasp)
-            grasp = self.next_grasp(grasp, handle, shape, state, result)
+            self.approach.back_off(robot, grasp)
+            grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
         if door and status != "done" and cfg.recovery.push_recovery:
-            self.recover_door(robot, state, result)
+            self.recovery.recover_door(robot, state, result)
         return status, state, grasp
 
     def locate(self, robot, obs: Observation, result: PlanResult, observed: tuple = ()):

@@ -1,10 +1,13 @@
-"""Elementary hand motions in control steps: a straight move of the grasp-site target, a hold."""
+"""Elementary hand motions in control steps: a straight move of the grasp-site target, a hold, and
+the hand's orientation along a pull."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from opend_mj.transforms import axis_angle_quat, quat_mul, turn_about_z
 
 
 def pressed(robot, target, press: float, floor: float | None = None) -> np.ndarray:
@@ -45,3 +48,21 @@ def hold(robot, pos, quat, fingers, seconds: float, press: float = 0.0) -> None:
     """Keep the grasp-site target and finger targets for ``seconds`` (s); ``press``: see :func:`pressed`."""
     for _ in range(max(0, int(round(seconds / robot.control_dt)))):
         robot.step(pressed(robot, pos, press), quat, fingers)
+
+
+def yawed(door, state, ang: float, tilt: float = 0.0) -> np.ndarray:
+    """The site orientation for a pull (``state``: a :class:`~.records.PullState`; ``door``: the
+    planner's :class:`~.config.DoorConfig`) whose direction is turned ``ang`` (deg) about z and tilted
+    ``tilt`` (deg, up positive) out of the horizontal: the grasp's, turned about z, then pitched
+    about the horizontal axis across the pull (the hand stays square to a flap it holds)."""
+    cfg = door
+    yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
+    quat = turn_about_z(state.quat0, math.radians(yaw))
+    if tilt == 0.0:
+        return quat
+    a = math.radians(ang)
+    b = state.base_dir
+    h = np.array([b[0] * math.cos(a) - b[1] * math.sin(a), b[0] * math.sin(a) + b[1] * math.cos(a), 0.0])
+    axis = np.cross(h, np.array([0.0, 0.0, 1.0]))  # rotating h about it by +tilt lifts it
+    q = quat_mul(axis_angle_quat(axis, math.radians(cfg.tilt_gain * tilt)), quat)
+    return q / np.linalg.norm(q)

@@ -16,11 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opend_mj.policy.planner.flap import FlapSteering
-from opend_mj.policy.planner.moves import kept_down
+from opend_mj.policy.planner.moves import kept_down, yawed
 from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
-from opend_mj.policy.planner.slide import PanelSliding
-from opend_mj.transforms import axis_angle_quat, quat_mul, turn_about_z
+from opend_mj.policy.planner.stage import Stage, StageContext
 
 #: Seconds a pull may last beyond the time its remaining travel needs at the pull speed.
 PULL_SLACK_TIME = 3.0
@@ -55,9 +53,20 @@ class PullRun:
     yaw_turn: float | None = None  # the turn (deg) the hand's yaw is at, where its rate is bounded
 
 
-class Pulling(FlapSteering, PanelSliding):
-    """The pull stage of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
-    ``hand``, ``state``, :meth:`holding`, :meth:`judge_kind`, :meth:`_stage`, :meth:`_time_left`)."""
+class Pulling(Stage):
+    """The pull (``config.pulling``, ``config.door``; the hand's ``grip_lost_change`` and
+    ``yaw_rate``), with its variants: a flap's circle (``flap``) and a panel slid along its front
+    (``slide``). Reads the grip through ``approach``
+    (:meth:`~opend_mj.policy.planner.approach.Approach.holding`), judges the held handle's kind
+    through ``kind``, looks again through ``front``."""
+
+    def __init__(self, ctx: StageContext, approach, kind, front, flap, slide):
+        super().__init__(ctx)
+        self.approach = approach
+        self.kind = kind
+        self.front = front
+        self.flap = flap
+        self.slide = slide
 
     def pull(self, robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
         """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
@@ -66,7 +75,7 @@ class Pulling(FlapSteering, PanelSliding):
         drawer's handle did not come along this direction (it stalled, or the hand came off it,
         within ``drawer_stuck_travel``: "stuck")."""
         cfg = self.config.pulling
-        self._stage(result, "pull", attempt=g.attempt)
+        self.ctx.enter(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
         start = robot.site_pos()
         run = PullRun(door=door, start=start, target=start.copy(), quat=g.quat, grip=robot.finger_qpos(),
@@ -78,7 +87,7 @@ class Pulling(FlapSteering, PanelSliding):
         if door:
             self._start_hinge_pull(state, start, result)
         for k in range(max_steps):
-            if self._time_left(robot) <= 0.0:
+            if self.ctx.time_left(robot) <= 0.0:
                 return _ended(result, state, "done", "time")
             site = robot.site_pos()
             status = self._grip_check(robot, site, run, state, result)
@@ -98,7 +107,7 @@ class Pulling(FlapSteering, PanelSliding):
     def _did_not_come(self, robot, run: PullRun, state: PullState, site) -> bool:
         """Whether a drawer did not come out with the hand along this direction (it slides another
         way, or not at all): the hand held it less than ``slip_distance`` (m) along the pull, and
-        its front, seen again, did not move (:meth:`front_seen` is None: too few pixels came 2 cm
+        its front, seen again, did not move (``front.seen`` is None: too few pixels came 2 cm
         or more toward the camera; looked at once per pull, and a front seen moving is kept). A
         robot that cannot look again: the handle came out less than ``drawer_stuck_travel`` (m)
         while held."""
@@ -109,7 +118,7 @@ class Pulling(FlapSteering, PanelSliding):
             return held < cfg.drawer_stuck_travel
         if held >= cfg.slip_distance or run.front_moved:
             return False
-        run.front_moved = self.front_seen(robot, site) is not None
+        run.front_moved = self.front.seen(robot, site) is not None
         return not run.front_moved
 
     # ---------------------------------------------------------------- one control step
@@ -125,7 +134,7 @@ class Pulling(FlapSteering, PanelSliding):
             return "slipped"
         if not cfg.verify.verify_grasp:
             return None
-        held, touch = self.holding(robot)
+        held, touch = self.approach.holding(robot)
         touching = held or any(v > cfg.verify.touch_min for v in touch.values())
         run.quiet = run.quiet + 1 if not touching else 0
         if touching or run.last_touch is None:
@@ -144,7 +153,7 @@ class Pulling(FlapSteering, PanelSliding):
                 run.held_path += float(np.linalg.norm(site - state.track[-1]))
             state.track.append(site.copy())
             if run.watch_kind and run.held_path >= cfg.kind.check_distance - 1e-9:
-                verdict = self.judge_kind(robot, site, state, result)
+                verdict = self.kind.judge_kind(robot, site, state, result)
                 if verdict is not None:
                     run.watch_kind = False
                     if verdict:
@@ -156,9 +165,9 @@ class Pulling(FlapSteering, PanelSliding):
         circle about the hinge seen in depth."""
         cfg = self.config.door
         if state.flap is None and cfg.flap_pull:
-            state.flap = self._flap_seen(state, result) or self._flap_looked(robot, site, run, state, result)
+            state.flap = self.flap.seen(state, result) or self.flap.looked(robot, site, run, state, result)
         if state.flap is not None:
-            self._steer_flap(site, run, state)
+            self.flap.steer(site, run, state)
             return
         if state.hinge is not None and cfg.hinge_look_distances:
             self._hinge_looked(robot, site, run, state, result)
@@ -170,7 +179,7 @@ class Pulling(FlapSteering, PanelSliding):
                 state.direction = tangent
                 state.turned = ang
                 state.opened = max(state.opened, abs(ang))
-                run.quat = self._yawed(state, ang)
+                run.quat = yawed(self.config.door, state, ang)
         self._yaw_rate_bounded(run, state, robot.control_dt)
 
     def _yaw_rate_bounded(self, run: PullRun, state: PullState, dt: float) -> None:
@@ -185,7 +194,7 @@ class Pulling(FlapSteering, PanelSliding):
         step = rate * dt
         if yaw != state.turned:  # (run.quat may still hold the last step's bounded yaw)
             yaw = state.turned if abs(state.turned - yaw) <= step else yaw + math.copysign(step, state.turned - yaw)
-            run.quat = self._yawed(state, yaw)
+            run.quat = yawed(self.config.door, state, yaw)
         run.yaw_turn = yaw
 
     def _follow_motion(self, site, run: PullRun, state: PullState, result: PlanResult) -> None:
@@ -220,7 +229,7 @@ class Pulling(FlapSteering, PanelSliding):
             state.direction = cand
             state.turned = ang
             state.peak_turn = ang if abs(ang) > abs(state.peak_turn) else state.peak_turn
-            run.quat = self._yawed(state, ang)
+            run.quat = yawed(self.config.door, state, ang)
 
     def _turn_bounded(self, direction: np.ndarray, cand: np.ndarray, run: PullRun) -> np.ndarray:
         """``cand`` (a horizontal unit vector) turned from ``direction`` by at most the angle a
@@ -240,22 +249,6 @@ class Pulling(FlapSteering, PanelSliding):
         a = math.copysign(limit, turn)
         c, s = math.cos(a), math.sin(a)
         return np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1], 0.0])
-
-    def _yawed(self, state: PullState, ang: float, tilt: float = 0.0) -> np.ndarray:
-        """The site orientation for a pull direction turned ``ang`` (deg) about z and tilted
-        ``tilt`` (deg, up positive) out of the horizontal: the grasp's, turned about z, then pitched
-        about the horizontal axis across the pull (the hand stays square to a flap it holds)."""
-        cfg = self.config.door
-        yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
-        quat = turn_about_z(state.quat0, math.radians(yaw))
-        if tilt == 0.0:
-            return quat
-        a = math.radians(ang)
-        b = state.base_dir
-        h = np.array([b[0] * math.cos(a) - b[1] * math.sin(a), b[0] * math.sin(a) + b[1] * math.cos(a), 0.0])
-        axis = np.cross(h, np.array([0.0, 0.0, 1.0]))  # rotating h about it by +tilt lifts it
-        q = quat_mul(axis_angle_quat(axis, math.radians(cfg.tilt_gain * tilt)), quat)
-        return q / np.linalg.norm(q)
 
     def _advance(self, robot, site, run: PullRun, g: GraspChoice, state: PullState, dt: float) -> None:
         """Move the target along the pull direction (biased for doors), at most ``lead`` ahead of
@@ -318,7 +311,7 @@ class Pulling(FlapSteering, PanelSliding):
     def _start_hinge_pull(self, state: PullState, site: np.ndarray, result: PlanResult) -> None:
         """Pull a door along the circle about the hinge seen in depth (kept across re-grasps)."""
         cfg = self.config.door
-        seen = self.state.hinge
+        seen = self.episode.hinge
         if not cfg.hinge_pull or seen is None or state.sense != 0.0:
             return
         hinge = np.asarray(seen, float)
@@ -334,7 +327,7 @@ class Pulling(FlapSteering, PanelSliding):
     def _hinge_looked(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
         """Check the hinge the pull turns about against the front seen turning: once per pull state
         at each of ``hinge_look_distances`` (m) the site came out, a new depth image
-        (:meth:`front_seen`); a front turned about a vertical axis (its shift toward the camera
+        (``front.seen``); a front turned about a vertical axis (its shift toward the camera
         sloped at least ``KindConfig.front_door_slope`` across it, less than half that up it) is
         hinged where that shift falls to zero: ``shift / across`` (m) from the handle, away from the
         side that came out. A front seen farther out at the handle than the hand that pulls it came
@@ -350,8 +343,8 @@ class Pulling(FlapSteering, PanelSliding):
         if state.hinge_looked >= len(looks) or float(np.linalg.norm(site - run.start)) < looks[state.hinge_looked]:
             return
         state.hinge_looked += 1
-        handle = self.state.handle
-        front = self.front_seen(robot, site) if handle is not None else None
+        handle = self.episode.handle
+        front = self.front.seen(robot, site) if handle is not None else None
         if front is None or abs(front["across"]) < self.config.kind.front_door_slope \
                 or abs(front["up"]) > abs(front["across"]) / 2:
             return  # no front seen turned about a vertical axis

@@ -139,7 +139,7 @@ class PullState:
 
 @dataclass
 class EpisodeState:
-    """What the planner keeps about the episode it runs (a fresh one per :meth:`Planner.run`).
+    """What the planner's stages keep about the episode being run (a fresh one per :meth:`Planner.run`).
 
     ``first``: the image a pulled front's motion is measured against (the episode's first, or one
     taken after a wrong handle was pushed back); ``handle``: the 3D handle being opened;

@@ -14,12 +14,19 @@ import numpy as np
 
 from opend_mj.policy.planner.moves import move
 from opend_mj.policy.planner.records import PlanResult, PullState
+from opend_mj.policy.planner.stage import Stage, StageContext
 from opend_mj.transforms import mat_to_quat
 
 
-class PushRecovery:
-    """The push recovery of :class:`~opend_mj.policy.planner.Planner` (uses its ``config``,
-    ``state``, :meth:`closed_profile`, :meth:`front_seen`, :meth:`_stage`, :meth:`_time_left`)."""
+class PushRecovery(Stage):
+    """The push recovery (``config.recovery``): the fist from ``grasping``
+    (:meth:`~opend_mj.policy.planner.grasp.Grasping.closed_profile`), a look before pushing through
+    ``front``."""
+
+    def __init__(self, ctx: StageContext, grasping, front):
+        super().__init__(ctx)
+        self.grasping = grasping
+        self.front = front
 
     def door_arc(self, state: PullState):
         """(hinge (x, y), the handle's radius (m), its start angle (rad), the sense of opening
@@ -30,7 +37,7 @@ class PushRecovery:
             return None  # too short, or a flap's (its hinge is horizontal: no side door's arc)
         track = np.array(state.track)
         p0 = track[0]
-        seen = self.state.hinge
+        seen = self.episode.hinge
         fit = fit_circle_xy(track) if abs(state.turned) >= cfg.push_min_turn else None
         centre = None
         if fit is not None:
@@ -54,8 +61,8 @@ class PushRecovery:
         """Push a door that opened and was lost open from inside; False where its arc is unknown or
         it opened too little (``push_min_turn``) or too little time is left (``push_min_time``)."""
         cfg = self.config.recovery
-        if self._time_left(robot) < cfg.push_min_time:
-            result.events.append({"push_skipped": {"time_left": round(self._time_left(robot), 2)}})
+        if self.ctx.time_left(robot) < cfg.push_min_time:
+            result.events.append({"push_skipped": {"time_left": round(self.ctx.time_left(robot), 2)}})
             return False
         arc = self.door_arc(state)
         if arc is None:
@@ -69,7 +76,7 @@ class PushRecovery:
             result.events.append({"push_skipped": {"front_seen": None}})
             return False
         p0 = state.track[0]
-        self._stage(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
+        self.ctx.enter(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
                     opened_deg=round(math.degrees(opened), 1))
         z = float(p0[2])
 
@@ -84,7 +91,7 @@ class PushRecovery:
             y = np.cross(tangent, radial)
             return mat_to_quat(np.column_stack([radial, y, tangent]))
 
-        fist = self.closed_profile("vertical")
+        fist = self.grasping.closed_profile("vertical")
         site, squat = robot.site_pose()
         out = radius + cfg.push_clearance
         # round the edge ahead of the door as far as it is known to have turned: by the held path or
@@ -105,7 +112,7 @@ class PushRecovery:
         phi = phi_in
         phi_end = math.radians(cfg.push_to_deg)
         dphi = self.config.pulling.speed / rho * robot.control_dt
-        while phi < phi_end and self._time_left(robot) > 0.0:
+        while phi < phi_end and self.ctx.time_left(robot) > 0.0:
             phi = min(phi_end, phi + dphi)
             robot.step(point(rho, phi), palm_quat(phi), fist)
         result.pushed = True
@@ -122,7 +129,7 @@ class PushRecovery:
         shuts it). None where the robot cannot look again or ``push_look`` is off."""
         if not self.config.recovery.push_look or getattr(robot, "look", None) is None:
             return None
-        seen = self.front_seen(robot, robot.site_pos())
+        seen = self.front.seen(robot, robot.site_pos())
         if seen is None:
             return "unseen"
         return math.atan(abs(seen["across"]))

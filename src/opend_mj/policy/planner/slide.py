@@ -7,7 +7,7 @@ direction of travel, at its leading edge). The panel's body lies on the side whe
 reaches farther from the handle in the depth image (:func:`~opend_mj.policy.perception.door_edges`,
 :func:`~opend_mj.policy.perception.door_edges_vertical`); it is slid that way first, then the other.
 The grasp for the slide (at the depth the handle was seen, a dexterous hand's fingers against the
-slide) is chosen by :meth:`~opend_mj.policy.planner.grasp.GraspGeometry.next_grasp`.
+slide) is chosen by :meth:`~opend_mj.policy.planner.grasp.Grasping.next_grasp`.
 """
 
 from __future__ import annotations
@@ -18,11 +18,12 @@ import numpy as np
 
 from opend_mj.policy.perception import door_edges, door_edges_vertical
 from opend_mj.policy.planner.records import PlanResult, PullState
+from opend_mj.policy.planner.stage import Stage
 
 
-class PanelSliding:
-    """Slide directions for :class:`~opend_mj.policy.planner.pull.Pulling` (uses the planner's
-    ``config``, ``state`` (the handle and the first observation))."""
+class PanelSliding(Stage):
+    """The slide variant of the pull: the directions to slide a panel along its front, from the
+    episode's handle and first image (``config.perception``)."""
 
     def slide_directions(self, shape: dict | None = None) -> list:
         """The directions (world unit vectors) to slide a panel whose handle did not come out, in
@@ -30,7 +31,7 @@ class PanelSliding:
         handle as measured (:class:`~opend_mj.policy.perception.HandleShape` as a dict), whose
         protrusion places the panel (the ring around the bar) where the box's own depths may
         reach past the front (a bar as tall as the cabinet)."""
-        handle, first = self.state.handle, self.state.first
+        handle, first = self.episode.handle, self.episode.first
         if handle is None or handle.kind != "bar" or first is None or first.depth is None:
             return []
         if shape is not None and "protrusion" in shape:

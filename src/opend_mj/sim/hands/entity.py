@@ -1,235 +1,27 @@
-"""Robot hands: specs, a registry, the dm_control entity, mocap attachment and grasp-frame helpers.
-
-Four hands ship in ``hands/<name>/`` (``hand.xml``, ``spec.json``, ``scene.xml``, ``render.png``):
-``franka`` (2 DoF), ``allegro`` (16), ``shadow`` (20), ``skeleton`` (20). ``hands/build_hands.py``
-generates the MJCF and specs from published dimensions (primitive geoms only).
-
-Conventions (world: z up, metres; cabinets face -x, the hand approaches handles moving along +x):
-
-* Every hand has a site ``grasp_site``: where the handle centre sits in a power grasp.
-  Its **+z axis is the approach direction** (palm -> object; +x world when grasping a cabinet
-  handle), its **+x axis is the handle's long axis**, +y = z cross x (the direction the open fingers
-  extend; for the Franka gripper the finger-closing axis).
-* The hand's root body (``spec.root_body``, the wrist / flange) has the same orientation as the grasp
-  site in all four built-in hands; the site sits at ``spec.grasp_site_pos`` in the root frame.
-  User hands may declare any fixed offset (``grasp_site_pos``, ``grasp_site_quat``).
-* ``orientation_for_handle("horizontal")``: site +x = +y world, +z = +x world (fingers point up).
-  ``orientation_for_handle("vertical")``: site +x = -z world, +z = +x world (fingers point +y).
-* The hand MJCF has no freejoint or mocap body. ``attach_with_mocap`` adds both to an arena: the
-  hand gets a freejoint and a soft weld to a mocap body; the root only ever moves through the mocap
-  body after reset (``MocapHandle.reset_pose`` places both together, ``MocapHandle.move`` moves the
-  mocap target only).
-* Finger actuators are position actuators, one per joint, in ``spec.actuator_names`` order;
-  ``spec.open_pose`` and ``spec.grasp_profiles[...]`` are targets in that order.
-
-Quaternions are (w, x, y, z) as in MuJoCo.
-"""
+"""A hand in a scene: the dm_control entity, its mocap attachment and its touch sensors."""
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import json
 import os
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from opend_mj import PROJECT_ROOT
-from opend_mj.transforms import mat_to_quat, quat_to_mat
-
 # Off-screen rendering goes through EGL (Mesa works without a GPU); must be set before mujoco loads.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-HANDS_DIR = PROJECT_ROOT / "hands"
-BUILTIN_HANDS = ("franka", "allegro", "shadow", "skeleton")
+from dm_control import composer, mjcf  # noqa: E402
+
+from opend_mj.sim.hands.registry import get_hand  # noqa: E402
+from opend_mj.sim.hands.spec import HandSpec, grasp_pose_to_root_pose  # noqa: E402
+from opend_mj.transforms import mat_to_quat  # noqa: E402
 
 #: The mocap weld: soft enough not to fight contacts, stiff enough to pull a stiff drawer
 #: (time constant 20 ms, critically damped; ~0.5 mm static offset per 10 N on a 1 kg hand).
 WELD_SOLREF = (0.02, 1.0)
 WELD_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 
-
-# --------------------------------------------------------------------------------------------------
-# Spec
-# --------------------------------------------------------------------------------------------------
-@dataclass
-class HandSpec:
-    """Everything a task or planner needs to know about a hand, saved as ``spec.json``."""
-
-    name: str
-    dof: int
-    joint_names: list[str]
-    actuator_names: list[str]
-    open_pose: list[float]
-    grasp_profiles: dict[str, list[float]]
-    grasp_site: str = "grasp_site"
-    root_body: str = "palm"
-    #: grasp-site pose in the root-body frame (position, quaternion w x y z).
-    grasp_site_pos: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    grasp_site_quat: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0, 0.0])
-    pregrasp_profiles: dict[str, list[float]] = field(default_factory=dict)
-    joint_ranges: dict[str, list[float]] = field(default_factory=dict)
-    joint_roles: dict[str, str] = field(default_factory=dict)
-    hand_type: str = "dexterous"
-    #: touch sensors (MuJoCo ``touch``: normal force inside a site around a finger or palm geom),
-    #: sensor name -> the part it belongs to (``palm``, ``thumb``, a finger name)
-    touch_sensors: dict[str, str] = field(default_factory=dict)
-    #: extra distance (m) along the approach axis to stop short of the handle (0: site at centre).
-    approach_offset: float = 0.0
-    #: seconds to ramp from open to closed targets.
-    close_time: float = 0.5
-    mass: float = 0.0
-    convention: str = ""
-    notes: str = ""
-
-    def __post_init__(self) -> None:
-        if self.dof != len(self.joint_names) or self.dof != len(self.actuator_names):
-            raise ValueError(f"hand {self.name!r}: dof {self.dof} does not match "
-                             f"{len(self.joint_names)} joints / {len(self.actuator_names)} actuators")
-        for key in ("horizontal", "vertical"):
-            if key not in self.grasp_profiles:
-                raise ValueError(f"hand {self.name!r}: grasp_profiles needs {key!r}")
-        for key, prof in list(self.grasp_profiles.items()) + list(self.pregrasp_profiles.items()):
-            if len(prof) != len(self.actuator_names):
-                raise ValueError(f"hand {self.name!r}: profile {key!r} has {len(prof)} targets, "
-                                 f"expected {len(self.actuator_names)}")
-        if len(self.open_pose) != len(self.actuator_names):
-            raise ValueError(f"hand {self.name!r}: open_pose has wrong length")
-
-    def grasp_profile(self, orientation: str) -> np.ndarray:
-        return np.asarray(self.grasp_profiles[orientation], dtype=float)
-
-    def pregrasp_profile(self, orientation: str) -> np.ndarray:
-        return np.asarray(self.pregrasp_profiles.get(orientation, self.open_pose), dtype=float)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "HandSpec":
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in data.items() if k in names})
-
-    def save(self, path: str | os.PathLike) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> "HandSpec":
-        return cls.from_dict(json.loads(Path(path).read_text()))
-
-
-# --------------------------------------------------------------------------------------------------
-# Registry
-# --------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class HandEntry:
-    name: str
-    xml_path: Path
-    spec: HandSpec
-
-
-_REGISTRY: dict[str, HandEntry] = {}
-
-
-def register_hand(name: str, xml_path: str | os.PathLike, spec: HandSpec | dict | str | os.PathLike,
-                  *, overwrite: bool = False) -> HandEntry:
-    """Register a hand: any MJCF (no freejoint/mocap in it) plus a spec (HandSpec, dict or JSON
-    path). The MJCF must contain ``spec.root_body``, ``spec.grasp_site`` and the named joints and
-    actuators. Returns the entry; ``get_hand(name)`` and ``Hand(name)`` then find it."""
-    if isinstance(spec, (str, os.PathLike)):
-        spec = HandSpec.load(spec)
-    elif isinstance(spec, dict):
-        spec = HandSpec.from_dict(spec)
-    xml_path = Path(xml_path).resolve()
-    if not xml_path.is_file():
-        raise FileNotFoundError(xml_path)
-    if name in _REGISTRY and not overwrite and _REGISTRY[name].xml_path != xml_path:
-        raise ValueError(f"hand {name!r} is already registered (pass overwrite=True)")
-    if spec.name != name:
-        spec = dataclasses.replace(spec, name=name)
-    entry = HandEntry(name, xml_path, spec)
-    _REGISTRY[name] = entry
-    return entry
-
-
-def _ensure_builtin() -> None:
-    for n in BUILTIN_HANDS:
-        if n not in _REGISTRY and (HANDS_DIR / n / "hand.xml").is_file():
-            _REGISTRY[n] = HandEntry(n, (HANDS_DIR / n / "hand.xml").resolve(),
-                                     HandSpec.load(HANDS_DIR / n / "spec.json"))
-
-
-def get_hand(name: str) -> HandEntry:
-    _ensure_builtin()
-    if name not in _REGISTRY:
-        raise KeyError(f"unknown hand {name!r}; known: {', '.join(list_hands())}")
-    return _REGISTRY[name]
-
-
-def list_hands() -> list[str]:
-    _ensure_builtin()
-    return list(_REGISTRY)
-
-
-def load_spec(name: str) -> HandSpec:
-    """The spec of a registered (or built-in) hand."""
-    return get_hand(name).spec
-
-
-def orientation_for_handle(orientation: str, approach=(1.0, 0.0, 0.0)) -> np.ndarray:
-    """Grasp-site quaternion for a handle approached along ``approach`` (default +x world).
-
-    horizontal: site x (handle axis) = horizontal, perpendicular to the approach (+y world for the
-    default approach), so the open fingers point up (+z world).
-    vertical: site x = -z world, so the open fingers point to the +y side.
-    """
-    z = np.asarray(approach, dtype=float)
-    z /= np.linalg.norm(z)
-    if orientation == "horizontal":
-        x = np.cross((0.0, 0.0, 1.0), z)
-        if np.linalg.norm(x) < 1e-6:
-            raise ValueError("horizontal handle needs a non-vertical approach")
-    elif orientation == "vertical":
-        x = np.array([0.0, 0.0, -1.0])
-        x = x - z * (x @ z)
-        if np.linalg.norm(x) < 1e-6:
-            raise ValueError("vertical handle needs a non-vertical approach")
-    else:
-        raise ValueError(f"orientation must be 'horizontal' or 'vertical', not {orientation!r}")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return mat_to_quat(np.column_stack([x, y, z]))
-
-
-@functools.lru_cache(maxsize=64)
-def _site_offset_rotation_t(grasp_site_quat: tuple) -> np.ndarray:
-    """Transpose of the site's rotation in the root frame (read-only; cached per hand)."""
-    r = quat_to_mat(grasp_site_quat).T.copy()
-    r.flags.writeable = False
-    return r
-
-
-def grasp_pose_to_root_pose(spec: HandSpec, site_pos, site_quat) -> tuple[np.ndarray, np.ndarray]:
-    """Root (= mocap) pose that puts the grasp site at ``site_pos`` with orientation ``site_quat``."""
-    r_site = quat_to_mat(site_quat)
-    r_root = r_site @ _site_offset_rotation_t(tuple(float(x) for x in spec.grasp_site_quat))
-    root_pos = np.asarray(site_pos, float) - r_root @ np.asarray(spec.grasp_site_pos, float)
-    return root_pos, mat_to_quat(r_root)
-
-
-def root_pose_to_grasp_pose(spec: HandSpec, root_pos, root_quat) -> tuple[np.ndarray, np.ndarray]:
-    r_root = quat_to_mat(root_quat)
-    pos = np.asarray(root_pos, float) + r_root @ np.asarray(spec.grasp_site_pos, float)
-    return pos, mat_to_quat(r_root @ quat_to_mat(spec.grasp_site_quat))
-
-
-# --------------------------------------------------------------------------------------------------
-# dm_control entity and mocap attachment
-# --------------------------------------------------------------------------------------------------
-from dm_control import composer, mjcf  # noqa: E402  (after the pure-numpy helpers on purpose)
 
 
 class Hand(composer.Entity):
@@ -460,3 +252,4 @@ def attach_with_mocap(arena_mjcf, hand: Hand, *, solref=WELD_SOLREF, solimp=WELD
                              relpose=[0, 0, 0, 1, 0, 0, 0], solref=list(solref),
                              solimp=list(solimp))
     return MocapHandle(hand=hand, mocap_body=mocap, weld=weld, freejoint=freejoint)
+

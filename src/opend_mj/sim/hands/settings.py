@@ -1,10 +1,14 @@
-"""Per-hand planner files beside each hand's model in ``hands/<name>/``.
+"""A hand's planner settings, the files beside its model in ``hands/<name>/``.
 
 * ``grasp.json`` (:class:`GraspProfile`, written by ``opend search-grasp``): how far the fingers
   close, how deep the grasp goes, how a knob is grasped.
 * ``planner.json`` (:class:`HandPlannerConfig`): the numbers of the planner that differ from hand
   to hand (a low handle's lift and pitch, the lowest grasp site, when a bar is pinched, how many
   fingers make a hold, when a gripper's grip is lost).
+
+Both loaders refuse what they do not know: an unknown key or a value of the wrong type is an error
+that names the file and the key (keys starting with ``_`` are notes for people and are skipped).
+Pure Python: the planner reads these through :class:`~opend_mj.sim.hands.HandModel`.
 """
 
 from __future__ import annotations
@@ -14,10 +18,23 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from opend_mj.sim.hands import HANDS_DIR
-
 GRASP_FILE = "grasp.json"
 PLANNER_FILE = "planner.json"
+
+
+def _read_object(path: Path, what: str) -> dict:
+    """The JSON object in ``path``; a clear error naming the file where it is not one."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read the hand's {what}: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object of the hand's {what}")
+    return data
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 @dataclass
@@ -27,36 +44,54 @@ class GraspProfile:
     ``close_scale``: how far the fingers close, as a fraction of the way from the pre-grasp to the
     spec's grasp profile; ``grasp_depth``: metres beyond the handle's estimated centre along the
     approach axis, per handle kind ("bar", "knob"); ``knob_orientation``: the finger orientation
-    for knobs ("horizontal" | "vertical"); ``search``: the settings the search tried."""
+    for knobs ("horizontal" | "vertical"); ``search``: the settings the search tried; ``note``:
+    free text for people."""
 
     hand: str
     close_scale: float = 1.0
     grasp_depth: dict = field(default_factory=lambda: {"bar": 0.0, "knob": 0.0})
     knob_orientation: str = "horizontal"
     search: list = field(default_factory=list)
+    note: str = ""
 
     @classmethod
-    def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
-        return Path(hands_dir or HANDS_DIR) / hand / GRASP_FILE
+    def load(cls, path: Path) -> "GraspProfile":
+        """Read ``path``; a clear error naming the file for unknown keys or wrong types."""
+        path = Path(path)
+        data = _read_object(path, "grasp settings")
+        fields = {f.name for f in dataclasses.fields(cls)}
+        values = {}
+        for key, value in data.items():
+            if key.startswith("_"):
+                continue
+            if key not in fields:
+                raise ValueError(f"{path}: unknown key {key!r} (known: {', '.join(sorted(fields))})")
+            values[key] = value
+        if not isinstance(values.get("hand"), str):
+            raise ValueError(f"{path}: 'hand' must name the hand, got {values.get('hand')!r}")
+        if "close_scale" in values and not (_number(values["close_scale"]) and 0 < values["close_scale"] <= 2):
+            raise ValueError(f"{path}: 'close_scale' must be a number in (0, 2], got {values['close_scale']!r}")
+        depth = values.get("grasp_depth", {})
+        if not (isinstance(depth, dict) and all(isinstance(k, str) and _number(v) and abs(v) < 0.1
+                                                for k, v in depth.items())):
+            raise ValueError(f"{path}: 'grasp_depth' must map handle kinds to metres (|depth| < 0.1), got {depth!r}")
+        if values.get("knob_orientation", "horizontal") not in ("horizontal", "vertical"):
+            raise ValueError(f"{path}: 'knob_orientation' must be 'horizontal' or 'vertical', "
+                             f"got {values['knob_orientation']!r}")
+        if not isinstance(values.get("search", []), list) or not isinstance(values.get("note", ""), str):
+            raise ValueError(f"{path}: 'search' must be a list and 'note' a string")
+        return cls(**values)
 
-    @classmethod
-    def load(cls, hand: str, hands_dir: Path | None = None) -> "GraspProfile | None":
-        path = cls.path_for(hand, hands_dir)
-        if not path.is_file():
-            return None
-        data = json.loads(path.read_text())
-        names = set(cls.__dataclass_fields__)
-        return cls(**{k: v for k, v in data.items() if k in names})
-
-    def save(self, hands_dir: Path | None = None) -> Path:
-        path = self.path_for(self.hand, hands_dir)
+    def save(self, path: Path) -> Path:
+        path = Path(path)
         path.write_text(json.dumps(asdict(self), indent=2) + "\n")
         return path
 
     def apply(self, config):
         """``config`` (a :class:`~opend_mj.policy.planner.PlannerConfig`) with this profile's
-        finger closing and grasp depth."""
-        return config.override({"grasp.close_scale": self.close_scale, "grasp.depth": dict(self.grasp_depth)})
+        finger closing, grasp depth and knob orientation."""
+        return config.override({"grasp.close_scale": self.close_scale, "grasp.depth": dict(self.grasp_depth),
+                                "grasp.knob_orientation": self.knob_orientation})
 
 
 @dataclass(frozen=True)
@@ -99,13 +134,13 @@ class HandPlannerConfig:
 
     ``flap_min_radius_share`` (or None: ``DoorConfig.flap_min_radius_share``): the least radius of a
     flap's circle, as a share of the distance from the handle to the front's far edge seen in depth
-    (:meth:`~opend_mj.policy.planner.flap.FlapSteering._flap_radius`). A gripper pitched at a low bar
+    (the flap pull, :mod:`opend_mj.policy.planner.flap`). A gripper pitched at a low bar
     holds it between two flat pads that let it roll along them as the flap lifts, so the held path
     rises faster than the bar and its own circle comes out too small: the hand then pitches ahead of
     the flap and twists the bar out of its pads.
 
     ``yaw_rate`` (deg/s, or None: at once): during a door's pull the hand's yaw follows the pull
-    direction's turn at most this fast (:meth:`~opend_mj.policy.planner.pull.Pulling._yaw_rate_bounded`);
+    direction's turn at most this fast (the pull, :mod:`opend_mj.policy.planner.pull`);
     the direction itself changes at once. Where the hinge the pull turns about is replaced by the
     one the camera sees turning, the direction turns by tens of degrees in one control step; a
     gripper yawed as fast twists the bar out of its pads.
@@ -136,10 +171,6 @@ class HandPlannerConfig:
     yaw_rate: float | None = None
 
     @classmethod
-    def path_for(cls, hand: str, hands_dir: Path | None = None) -> Path:
-        return Path(hands_dir or HANDS_DIR) / hand / PLANNER_FILE
-
-    @classmethod
     def for_type(cls, hand_type: str) -> "HandPlannerConfig":
         """The numbers for a hand without a ``planner.json``, by its type."""
         return HAND_TYPE_DEFAULTS.get(hand_type, cls())
@@ -148,19 +179,14 @@ class HandPlannerConfig:
     def load(cls, path: Path) -> "HandPlannerConfig":
         """Read ``path``; a clear error naming the file for unknown fields or wrong types."""
         path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path}: cannot read the hand's planner numbers: {exc}") from exc
-        if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a JSON object of planner numbers")
+        data = _read_object(path, "planner numbers")
         fields = {f.name: f for f in dataclasses.fields(cls)}
         values = {}
         for key, value in data.items():
             if key.startswith("_"):  # "_doc" and the like: notes for people
                 continue
             if key not in fields:
-                raise ValueError(f"{path}: unknown field {key!r} (known: {', '.join(fields)})")
+                raise ValueError(f"{path}: unknown key {key!r} (known: {', '.join(fields)})")
             if key == "clearance_knob_turn":
                 if not isinstance(value, bool):
                     raise ValueError(f"{path}: {key!r} must be true or false, got {value!r}")
@@ -184,15 +210,6 @@ class HandPlannerConfig:
                 raise ValueError(f"{path}: 'hold_parts' must be a whole number of at least 1, got {value!r}")
             values[key] = int(value) if key == "hold_parts" else float(value)
         return cls(**values)
-
-    @classmethod
-    def for_hand(cls, spec, hands_dir: Path | None = None) -> "HandPlannerConfig":
-        """``hands/<spec.name>/planner.json`` where there is one, else the defaults of the hand's type
-        (None ``spec``: the defaults)."""
-        if spec is None:
-            return cls()
-        path = cls.path_for(spec.name, hands_dir)
-        return cls.load(path) if path.is_file() else cls.for_type(spec.hand_type)
 
     def to_dict(self) -> dict:
         return asdict(self)
