@@ -517,7 +517,8 @@ def write_readme(name: str, source_doc: str) -> None:
         "**Files.** `hand.xml` (the hand, no freejoint), `scene.xml` (includes `hand.xml`, adds a floor and a",
         f"light: `python -m mujoco.viewer --mjcf hands/{name}/scene.xml`), `spec.json` (grasp site, poses,",
         "grasp profiles), `grasp.json` where the grasp search wrote one, `planner.json` (the planner's numbers "
-        "for this hand: docs/planner.md), `render.png`.",
+        "for this hand: docs/planner.md), `render.png`, `CHANGELOG.md` (what changed in these files). All of them "
+        "are read through one `HandModel` (`opend_mj.sim.hands.get_hand`).",
         "",
         f"**Touch.** {len(spec.get('touch_sensors', {}))} MuJoCo `touch` sensors, one per collision geom of the "
         "fingers, thumb and palm (site `touch_<geom>`: the geom grown by 2 mm); `spec.json` "

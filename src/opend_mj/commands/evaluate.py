@@ -114,6 +114,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
     policy_spec, parsed_args = None, ()
+    actor = solver  # what acts, as the results' solver column names it: a handle solver or an agent
     if policy is not None:
         from opend_mj.evaluation.agents import (
             agent_name,
@@ -128,14 +129,14 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
             parsed_args = parse_policy_args(policy_args)
             target, attr = resolve_policy(policy)
             policy_spec = f"{target}:{attr}"
-            solver = agent_name(load_agent(policy_spec, parsed_args))
+            actor = agent_name(load_agent(policy_spec, parsed_args))
         except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
             raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
     elif policy_args:
         raise click.UsageError("--policy-arg needs --policy")
     try:
         jobs = [job for seed in dict.fromkeys(seeds)
-                for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
+                for job in make_jobs(cabinets_dir, hands, actor, split=split, seed=seed, light_scale=light_scale,
                                      pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
                                      physics_timestep=physics_timestep, targets=targets or None, kind=kind)]
     except ValueError as exc:

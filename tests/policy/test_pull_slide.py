@@ -15,45 +15,28 @@ from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat
 
-DT = 1.0 / 60.0  # the task's control step (s)
+from .fake_robot import DT, HANDLE_SPEED, FakeRobot
+
 HANDLE_Y = -0.25  # the bar's y (m): near the right (-y) edge of a front spanning y in [-0.3, 0.3]
 
 
-class HeldSlider:
+class HeldSlider(FakeRobot):
     """A robot whose grasp site holds a panel's bar perfectly; the bar moves only along
     ``axis`` (a world unit vector), from 0 to ``travel`` (m): each step it goes as far along its
     slide as the target's projection on it, at most 2 m/s."""
 
-    look = None  # no camera to look again
-    control_dt = DT
-
     def __init__(self, axis, travel: float):
+        super().__init__()
         self.axis, self.travel = np.asarray(axis, float), travel
         self.start = np.array([0.965, HANDLE_Y, 0.0])
         self.opening = 0.0
-        self.n_steps = 0
 
-    @property
-    def time(self) -> float:
-        return self.n_steps * DT
-
-    def site_pos(self) -> np.ndarray:
+    def handle_pos(self) -> np.ndarray:
         return self.start + self.opening * self.axis
 
-    def site_pose(self):
-        return self.site_pos(), np.array([1.0, 0.0, 0.0, 0.0])
-
-    def finger_qpos(self) -> np.ndarray:
-        return np.zeros(16)
-
-    def contact_touch(self) -> dict:
-        return {"ff": 5.0, "mf": 5.0, "rf": 5.0}
-
-    def step(self, site_pos, site_quat, fingers) -> None:
-        want = float((np.asarray(site_pos, float) - self.start) @ self.axis)
-        rate = 2.0 * DT
-        self.opening = float(np.clip(want, max(0.0, self.opening - rate), min(self.travel, self.opening + rate)))
-        self.n_steps += 1
+    def follow(self, p, quat, fingers) -> None:
+        want = float((p - self.start) @ self.axis)
+        self.opening = self.moved(self.opening, want, self.travel, HANDLE_SPEED * DT)
 
 
 def _forward_view():

@@ -25,7 +25,7 @@ from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import HANDS_DIR, get_hand, load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
 
-from .test_narrow_door_pull import PANEL_X, PROUD, SeenDoor, _view
+from .test_pull_door_hinge import PANEL_X, PROUD, SeenDoor, _view
 
 
 
@@ -45,7 +45,7 @@ class PadDoor(SeenDoor):
         yaw = math.degrees(math.atan2(axis[1], axis[0]))
         if self.held and self.yaws and abs(math.remainder(yaw - self.yaws[-1], 360.0)) > self.twist_deg:
             self.n_steps += 1
-            self.held, self.free = False, np.asarray(site_pos, float)
+            self.let_go(site_pos)
             return
         self.yaws.append(yaw)
         super().step(site_pos, site_quat, fingers)

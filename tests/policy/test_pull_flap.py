@@ -17,62 +17,36 @@ from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
 
-DT = 1.0 / 60.0  # the task's control step (s)
+from .fake_robot import DT, HANDLE_SPEED, FakeRobot
+
 START_Z = 0.5  # the handle's height when the flap is closed (m)
 
 
-class HeldFlap:
+class HeldFlap(FakeRobot):
     """A robot whose grasp site holds a flap's bar: the handle on a circle of ``radius`` (m) in the
     x-z plane about a hinge ``radius`` above (``sign`` +1) or below (-1) it, opening toward -x up to
     ``travel`` (rad). Each step the handle goes to the point of its circle nearest the target; the
     grip holds while the hand's approach axis is within ``hold_deg`` of the flap's inward normal,
     and once lost stays lost (the hand then moves freely)."""
 
-    look = None  # no camera to look again
-    control_dt = DT
-
     def __init__(self, sign: float, radius: float, travel: float, hold_deg: float = 30.0):
+        super().__init__()
         self.sign, self.radius, self.travel, self.hold_deg = sign, radius, travel, hold_deg
         self.hinge_z = START_Z + sign * radius
         self.opening = 0.0
-        self.held = True
-        self.free = None  # the site once the grip is lost
-        self.n_steps = 0
-
-    @property
-    def time(self) -> float:
-        return self.n_steps * DT
 
     def handle_pos(self) -> np.ndarray:
         a = self.opening
         return np.array([-0.03 - self.radius * math.sin(a), 0.0, self.hinge_z - self.sign * self.radius * math.cos(a)])
 
-    def site_pos(self) -> np.ndarray:
-        return self.handle_pos() if self.held else self.free.copy()
-
-    def site_pose(self):
-        return self.site_pos(), np.array([1.0, 0.0, 0.0, 0.0])
-
-    def finger_qpos(self) -> np.ndarray:
-        return np.zeros(16)
-
-    def contact_touch(self) -> dict:
-        return {"ff": 5.0, "mf": 5.0, "rf": 5.0} if self.held else {}
-
-    def step(self, site_pos, site_quat, fingers) -> None:
-        p = np.asarray(site_pos, float)
-        self.n_steps += 1
-        if not self.held:
-            self.free = p
-            return
+    def follow(self, p, site_quat, fingers) -> None:
         a = self.opening
         inward = np.array([math.cos(a), 0.0, -self.sign * math.sin(a)])  # into the flap's front
         if math.degrees(math.acos(np.clip(quat_axis_z(site_quat) @ inward, -1.0, 1.0))) > self.hold_deg:
-            self.held, self.free = False, self.handle_pos()  # the bar twisted out of the hand
+            self.let_go(self.handle_pos())  # the bar twisted out of the hand
             return
         want = math.atan2(-0.03 - p[0], self.sign * (self.hinge_z - p[2]))
-        rate = 2.0 * DT / self.radius  # a handle follows the hand at most at 2 m/s
-        self.opening = float(np.clip(want, max(0.0, a - rate), min(self.travel, a + rate)))
+        self.opening = self.moved(a, want, self.travel, HANDLE_SPEED * DT / self.radius)
 
 
 def _pull_flap(part: HeldFlap, config: PlannerConfig, front_z: tuple) -> float:
@@ -169,8 +143,8 @@ class LooseFlap(HeldFlap):
         p = np.asarray(site_pos, float)
         super().step(p - np.array([self.x0 + 0.03, 0.0, 0.0]), site_quat, fingers)  # the parent's frame
 
-    def contact_touch(self) -> dict:
-        return {"palm": 5.0} if self.held else {}
+    def touch(self) -> dict:
+        return {"palm": 5.0}
 
     def look(self) -> np.ndarray:
         return _flap_depth(self.sign, self.radius, self.opening)

@@ -24,7 +24,8 @@ from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
 
-DT = 1.0 / 60.0  # the task's control step (s)
+from .fake_robot import DT, HANDLE_SPEED, FakeRobot
+
 PANEL_X = 1.0  # the closed door's front (m)
 HANDLE_Z = 0.5  # the handle's height and the camera's (m)
 PROUD = 0.035  # the handle's centre in front of the door's front (m)
@@ -33,7 +34,7 @@ PROUD = 0.035  # the handle's centre in front of the door's front (m)
 NARROW_DOOR = ("45271", "joint_4")
 
 
-class NarrowDoor:
+class NarrowDoor(FakeRobot):
     """A robot holding a door's handle, which stands ``PROUD`` (m) out of the door's front and
     ``radius`` (m) along it from a vertical hinge at (``PANEL_X``, ``hinge_y``); the door opens
     toward -x up to ``travel`` (rad).
@@ -47,6 +48,7 @@ class NarrowDoor:
 
     def __init__(self, radius: float, hinge_y: float, travel: float, lever: float = 0.0, slides: bool = False,
                  hold_deg: float = 30.0):
+        super().__init__()
         self.radius, self.hinge_y, self.travel = radius, hinge_y, travel
         self.lever, self.slides, self.hold_deg = lever, slides, hold_deg
         self.sense = 1.0 if hinge_y < 0 else -1.0  # the handle on the far side of its hinge
@@ -54,16 +56,6 @@ class NarrowDoor:
         self.opening = 0.0
         self.axis = np.array([1.0, 0.0, 0.0])  # the hand's approach axis
         self.slide_site = None  # where the hand is along a sliding bar (m, world)
-        self.held = True
-        self.free = None
-        self.n_steps = 0
-
-    look = None  # no camera unless a subclass has one
-    control_dt = DT
-
-    @property
-    def time(self) -> float:
-        return self.n_steps * DT
 
     def inward(self, a: float) -> np.ndarray:
         """The door's inward normal (horizontal unit vector) at opening ``a`` (rad)."""
@@ -82,15 +74,6 @@ class NarrowDoor:
             return self.slide_site.copy()
         return self.handle_pos() - self.lever * self.axis
 
-    def site_pose(self):
-        return self.site_pos(), np.array([1.0, 0.0, 0.0, 0.0])
-
-    def finger_qpos(self) -> np.ndarray:
-        return np.zeros(16)
-
-    def contact_touch(self) -> dict:
-        return {"ff": 5.0, "mf": 5.0, "rf": 5.0} if self.held else {}
-
     def _opening_for(self, held: np.ndarray) -> float:
         """The opening (rad) that puts the handle (``slides``: the bar's line) nearest ``held``."""
         d = held[:2] - self.hinge
@@ -102,21 +85,15 @@ class NarrowDoor:
         psi0 = math.atan2(self.sense * self.radius, -PROUD)  # the handle's bearing from the hinge, closed
         return self.sense * math.remainder(math.atan2(d[1], d[0]) - psi0, 2 * math.pi)
 
-    def step(self, site_pos, site_quat, fingers) -> None:
-        p = np.asarray(site_pos, float)
-        self.n_steps += 1
-        if not self.held:
-            self.free = p
-            return
+    def follow(self, p, site_quat, fingers) -> None:
         self.axis = quat_axis_z(site_quat)
         a = self.opening
         inward = np.array([*self.inward(a), 0.0])
         if math.degrees(math.acos(np.clip(self.axis @ inward, -1.0, 1.0))) > self.hold_deg:
-            self.held, self.free = False, self.site_pos()  # the handle turned out of the fingers
+            self.let_go(self.site_pos())  # the handle turned out of the fingers
             return
         want = self._opening_for(p + self.lever * self.axis)
-        rate = 2.0 * DT / self.radius  # a handle follows the hand at most at 2 m/s
-        self.opening = float(np.clip(want, max(0.0, a - rate), min(self.travel, a + rate)))
+        self.opening = self.moved(a, want, self.travel, HANDLE_SPEED * DT / self.radius)
         if self.slides:
             self.slide_site = p if self.opening == want else None
 

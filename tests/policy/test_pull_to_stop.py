@@ -15,54 +15,34 @@ from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat
 
-DT = 1.0 / 60.0  # the task's control step (s)
+from .fake_robot import DT, HANDLE_SPEED, FakeRobot
 
 
-class HeldPart:
+class HeldPart(FakeRobot):
     """A robot whose grasp site holds a handle perfectly: each step the site goes to the point of
     the handle's path nearest the target, within the part's range. Doors: the handle on a circle
     of ``radius`` (m) about a hinge at (0, ``hinge_y``), opening toward -x; drawers: straight
     along -x from x = 0."""
 
-    look = None  # no camera to look again
-
     def __init__(self, kind: str, travel: float, radius: float = 0.0, hinge_y: float = 0.0):
+        super().__init__()
         self.kind, self.travel, self.radius, self.hinge_y = kind, travel, radius, hinge_y
         self.sense = 1.0 if hinge_y < 0 else -1.0  # the handle starts on the far side of its hinge
         self.opening = 0.0  # rad (door) or m (drawer)
-        self.n_steps = 0
 
-    control_dt = DT
-
-    @property
-    def time(self) -> float:
-        return self.n_steps * DT
-
-    def site_pos(self) -> np.ndarray:
+    def handle_pos(self) -> np.ndarray:
         if self.kind == "drawer":
             return np.array([-0.03 - self.opening, 0.0, 0.5])
         a = self.opening
         return np.array([-0.03 - self.radius * math.sin(a), self.hinge_y + self.sense * self.radius * math.cos(a), 0.5])
 
-    def site_pose(self):
-        return self.site_pos(), np.array([1.0, 0.0, 0.0, 0.0])
-
-    def finger_qpos(self) -> np.ndarray:
-        return np.zeros(16)
-
-    def contact_touch(self) -> dict:
-        return {"ff": 5.0, "mf": 5.0, "rf": 5.0}
-
-    def step(self, site_pos, site_quat, fingers) -> None:
-        p = np.asarray(site_pos, float)
+    def follow(self, p, quat, fingers) -> None:
         if self.kind == "drawer":
             want = -0.03 - p[0]
         else:
             want = math.atan2(-0.03 - p[0], self.sense * (p[1] - self.hinge_y))
-        # a handle follows the hand at most as fast as the hand can move it (2 m/s)
-        rate = 2.0 * DT / (self.radius if self.kind == "door" else 1.0)
-        self.opening = float(np.clip(want, max(0.0, self.opening - rate), min(self.travel, self.opening + rate)))
-        self.n_steps += 1
+        rate = HANDLE_SPEED * DT / (self.radius if self.kind == "door" else 1.0)
+        self.opening = self.moved(self.opening, want, self.travel, rate)
 
 
 def _pull(part: HeldPart, config: PlannerConfig, hinge_seen: bool = True) -> float:
