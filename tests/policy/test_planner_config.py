@@ -61,14 +61,25 @@ def test_each_hand_carries_its_planner_numbers(hand, expected):
         assert getattr(numbers, key) == value, key
 
 
-def test_a_hand_without_a_planner_file_gets_its_types_numbers(tmp_path):
+@pytest.fixture
+def forget_users_hands():
+    """Users' hands registered by a test leave the registry after it."""
+    from opend_mj.sim.hands import registry
+
+    before = set(registry._REGISTRY)
+    yield
+    for name in set(registry._REGISTRY) - before:
+        registry._REGISTRY.pop(name)
+
+
+def test_a_hand_without_a_planner_file_gets_its_types_numbers(tmp_path, forget_users_hands):
     """A user's hand registered from a folder with no planner.json gets its type's numbers."""
     import shutil
 
     from opend_mj.policy.planner import HandPlannerConfig, Planner
     from opend_mj.sim.hands import HANDS_DIR, load_spec, register_hand
 
-    for name, source in (("my_gripper", "franka"), ("my_hand", "allegro")):
+    for name, source in (("users_gripper", "franka"), ("users_hand", "allegro")):
         folder = tmp_path / name
         folder.mkdir()
         shutil.copy(HANDS_DIR / source / "hand.xml", folder / "hand.xml")
@@ -76,14 +87,14 @@ def test_a_hand_without_a_planner_file_gets_its_types_numbers(tmp_path):
         spec.save(folder / "spec.json")
         model = register_hand(name, folder / "hand.xml", folder / "spec.json", overwrite=True)
         assert model.grasp is None and model.folder == folder.resolve()
-        if name == "my_gripper":
+        if name == "users_gripper":
             assert model.planner.hold_parts == 2 and model.planner.grip_lost_change == 0.012
         else:
             assert model.planner.pinch_gap == 0.012 and model.planner.grip_lost_change is None
     assert Planner(None, None).hand == HandPlannerConfig()
 
 
-def test_a_users_hand_is_planned_with_its_own_files(tmp_path):
+def test_a_users_hand_is_planned_with_its_own_files(tmp_path, forget_users_hands):
     """register_hand honours the grasp.json and planner.json beside the user's model: the planner
     built for that hand uses them, and an unknown key in either is refused, naming the file and key."""
     import shutil
@@ -91,31 +102,31 @@ def test_a_users_hand_is_planned_with_its_own_files(tmp_path):
     from opend_mj.policy.factory import build_planner
     from opend_mj.sim.hands import HANDS_DIR, load_spec, register_hand
 
-    folder = tmp_path / "my_allegro"
+    folder = tmp_path / "users_allegro"
     folder.mkdir()
     shutil.copy(HANDS_DIR / "allegro" / "hand.xml", folder / "hand.xml")
-    dataclasses.replace(load_spec("allegro"), name="my_allegro").save(folder / "spec.json")
+    dataclasses.replace(load_spec("allegro"), name="users_allegro").save(folder / "spec.json")
     (folder / "planner.json").write_text(json.dumps({"hold_parts": 3, "hook_slide": 0.01}))
-    (folder / "grasp.json").write_text(json.dumps({"hand": "my_allegro", "close_scale": 0.7,
+    (folder / "grasp.json").write_text(json.dumps({"hand": "users_allegro", "close_scale": 0.7,
                                                    "grasp_depth": {"bar": 0.002, "knob": 0.0},
                                                    "knob_orientation": "vertical"}))
-    register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
-    planner = build_planner("oracle", "my_allegro", ground_truth=lambda: None)
+    register_hand("users_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+    planner = build_planner("oracle", "users_allegro", ground_truth=lambda: None)
     assert planner.hand.hold_parts == 3 and planner.hand.hook_slide == 0.01
     assert planner.config.grasp.close_scale == 0.7 and planner.config.grasp.depth["bar"] == 0.002
     assert planner.config.grasp.knob_orientation == "vertical"
-    assert build_planner("oracle", "my_allegro", use_grasp_file=False,
+    assert build_planner("oracle", "users_allegro", use_grasp_file=False,
                          ground_truth=lambda: None).config.grasp.close_scale == 1.0
 
-    (folder / "grasp.json").write_text(json.dumps({"hand": "my_allegro", "close_scael": 0.7}))
+    (folder / "grasp.json").write_text(json.dumps({"hand": "users_allegro", "close_scael": 0.7}))
     with pytest.raises(ValueError, match="unknown key 'close_scael'") as err:
-        register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+        register_hand("users_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
     assert str(folder / "grasp.json") in str(err.value)
     (folder / "grasp.json").unlink()
     spec = json.loads((folder / "spec.json").read_text())
     (folder / "spec.json").write_text(json.dumps({**spec, "finger_count": 4}))
     with pytest.raises(ValueError, match="unknown key 'finger_count'") as err:
-        register_hand("my_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
+        register_hand("users_allegro", folder / "hand.xml", folder / "spec.json", overwrite=True)
     assert str(folder / "spec.json") in str(err.value)
 
 

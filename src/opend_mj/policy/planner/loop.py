@@ -33,7 +33,7 @@ from opend_mj.policy.planner.records import (
 from opend_mj.policy.planner.recovery import PushRecovery
 from opend_mj.policy.planner.robot import new_depth
 from opend_mj.policy.planner.slide import PanelSliding
-from opend_mj.policy.planner.stage import StageContext
+from opend_mj.policy.planner.stage import Stage, StageContext
 from opend_mj.sim.hands import HandModel, HandPlannerConfig, HandSpec, get_hand
 from opend_mj.transforms import quat_axis_z
 
@@ -73,7 +73,7 @@ def settle_box(solver, box, depth, view, config) -> tuple:
     return box, events
 
 
-class Planner:
+class Planner(Stage):
     """Deterministic open-the-handle controller around a handle solver: a short loop over its stages.
 
     Stages (each an object over one :class:`~opend_mj.policy.planner.stage.StageContext`):
@@ -98,8 +98,8 @@ class Planner:
         spec = hand.spec if isinstance(hand, HandModel) else hand
         if numbers is None:
             numbers = hand.planner if isinstance(hand, HandModel) else _registered_numbers(spec)
+        super().__init__(StageContext(config=config, spec=spec, hand=numbers, on_stage=on_stage))
         self.solver = solver
-        self.ctx = StageContext(config=config, spec=spec, hand=numbers, on_stage=on_stage)
         self.front = FrontWatch(self.ctx)
         self.grasping = Grasping(self.ctx)
         self.approach = Approach(self.ctx)
@@ -109,20 +109,7 @@ class Planner:
         self.pulling = Pulling(self.ctx, self.approach, self.kind, self.front, self.flap, self.slide)
         self.recovery = PushRecovery(self.ctx, self.grasping, self.front)
 
-    @property
-    def spec(self) -> HandSpec:
-        return self.ctx.spec
-
-    @property
-    def hand(self) -> HandPlannerConfig:
-        """The planner's numbers for the hand (``planner.json``)."""
-        return self.ctx.hand
-
-    @property
-    def config(self) -> PlannerConfig:
-        return self.ctx.config
-
-    @config.setter
+    @Stage.config.setter
     def config(self, config: PlannerConfig) -> None:
         self.ctx.config = config
 

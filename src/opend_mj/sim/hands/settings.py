@@ -22,7 +22,7 @@ GRASP_FILE = "grasp.json"
 PLANNER_FILE = "planner.json"
 
 
-def _read_object(path: Path, what: str) -> dict:
+def read_json_object(path: Path, what: str) -> dict:
     """The JSON object in ``path``; a clear error naming the file where it is not one."""
     try:
         data = json.loads(Path(path).read_text())
@@ -58,7 +58,7 @@ class GraspProfile:
     def load(cls, path: Path) -> "GraspProfile":
         """Read ``path``; a clear error naming the file for unknown keys or wrong types."""
         path = Path(path)
-        data = _read_object(path, "grasp settings")
+        data = read_json_object(path, "grasp settings")
         fields = {f.name for f in dataclasses.fields(cls)}
         values = {}
         for key, value in data.items():
@@ -179,7 +179,7 @@ class HandPlannerConfig:
     def load(cls, path: Path) -> "HandPlannerConfig":
         """Read ``path``; a clear error naming the file for unknown fields or wrong types."""
         path = Path(path)
-        data = _read_object(path, "planner numbers")
+        data = read_json_object(path, "planner numbers")
         fields = {f.name: f for f in dataclasses.fields(cls)}
         values = {}
         for key, value in data.items():

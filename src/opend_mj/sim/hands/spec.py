@@ -88,12 +88,9 @@ class HandSpec:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "HandSpec":
         """Read ``path`` (``spec.json``); a clear error naming the file where it is not a valid spec."""
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path}: cannot read the hand's spec: {exc}") from exc
-        if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a JSON object (the hand's spec)")
+        from opend_mj.sim.hands.settings import read_json_object
+
+        data = read_json_object(path, "spec")
         try:
             return cls.from_dict(data)
         except (TypeError, ValueError) as exc:
