@@ -21,10 +21,13 @@ evaluate: install
 	$(BIN)/opend score $(QUICKSTART_OUT)/oracle_allegro_test.jsonl \
 		--csv $(QUICKSTART_OUT)/scores.csv --plot $(QUICKSTART_OUT)/scores.png
 
-## Every committed file under results/ from scratch (the README's tables come from these; about
+## Every generated-split file under results/ from scratch (the README's tables come from these; about
 ## 50 min on 2 cores): oracle, CLIPort and Faster R-CNN with all four hands on the procedural test split,
 ## the oracle (Shadow) and both learned solvers (all hands) at light x 0.7, all three with reworded
-## instructions (the hand-written corpus of tests/data), and the 1/120 s physics step.
+## instructions (the hand-written corpus of tests/data), and the 1/120 s physics step; then `opend report`.
+## The rest of results/: results/real/ (make eval-real) and results/bc/<hand>_shipped_test.jsonl (the
+## shipped behaviour-cloning policies, docs/demonstrations.md). tests/evaluation/test_results_dir.py
+## fails on any other file there.
 HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
 RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
 LEARNED_RESULTS := cliport_test cliport_test_light07 cliport_test_corpus \

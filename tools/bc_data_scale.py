@@ -5,8 +5,8 @@ demonstrations it was trained on, and draws success (overall, drawers, doors; wi
 intervals) against that number, one line per hand, with the planner's success on the same episodes
 as a reference where given. Prints the table as Markdown.
 
-    python tools/bc_data_scale.py --run 50=results/bc/allegro_n50.jsonl --run 200=... \
-        [--planner results/bc/allegro_planner_fasterrcnn.jsonl] --out docs/bc_data_scale.png
+    python tools/bc_data_scale.py --run 50=build/bc/allegro_n50_test.jsonl --run 200=... \
+        [--planner results/fasterrcnn_test.jsonl] --out build/bc_data_scale.png
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def main(argv=None) -> None:
                     help="number of training demonstrations = results file of that policy (repeatable)")
     ap.add_argument("--planner", action="append", default=[], metavar="RESULTS",
                     help="the planner's results on the same episodes (a reference line per hand)")
-    ap.add_argument("--out", type=Path, default=Path("docs/bc_data_scale.png"))
+    ap.add_argument("--out", type=Path, default=Path("build/bc_data_scale.png"))
     ap.add_argument("--title", default="Behaviour cloning: success against demonstrations")
     args = ap.parse_args(argv)
 

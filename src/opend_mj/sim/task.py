@@ -120,7 +120,39 @@ class SuccessChecker:
 
 
 class OpenCabinetTask(composer.Task):
-    """Open the door or drawer that the instruction names."""
+    """Open the door or drawer that the instruction names. The task card:
+
+    Randomised: the cabinet and target are the episode's (`EpisodeSpec`; the benchmark runs every
+    target of a split, the environments draw one per reset). The room is one of nine
+    (`EpisodeSpec.room`, else drawn from ``seed``); ``seed`` also draws its floor and wall
+    materials, furniture and lights (`RoomArena`). Fixed: the cabinet (at the origin, front facing
+    -x, every part closed at the start), the camera (in front of the cabinet, placed from its
+    bounds, pitched 12 degrees down, ``camera_fovy`` 45 degrees, plus ``camera_shift`` m), the hand's
+    start (between camera and cabinet, beside it and out of the camera's view, fingers open).
+    ``light_scale`` scales every light (0.7: the paper's darker condition).
+
+    Observed (observables): ``rgb`` (S x S x 3, uint8) and ``depth`` (S x S, planar metres) of the
+    front camera, S = ``image_size`` (256 px; intrinsics and pose from `camera_view`); the
+    ``instruction`` text; ``hand_joint_pos`` (finger joints, rad or m); ``root_pos`` (m, world) and
+    ``root_quat`` (w, x, y, z) of the hand root; ``open_ratio`` (ground truth, for analysis: the
+    benchmark never hands it to an agent).
+
+    Action (`action_spec`, 7 + n floats): the root's target position (m, world, clipped to the
+    cabinet's bounds +- ``workspace_margin``, 1.5 m), its target quaternion (w, x, y, z; normalised),
+    n finger targets (the position actuators' units, clipped to their ranges). The mocap body moves
+    toward the target at most ``max_root_speed`` (0.75 m/s) and ``max_root_angular_speed`` (4 rad/s),
+    interpolated over the physics substeps, and the root follows it through a soft weld: nothing
+    teleports. A non-finite action, a wrong shape or a zero quaternion raises.
+
+    Success (`outcome`): the instructed target's open ratio above ``success_threshold`` (0.2;
+    drawer travel / drawer length, door angle / 180 degrees). The outcome also gives the fraction of
+    the joint's range (ManiSkill3's criterion: 0.75 or more) and the other targets that opened by
+    more than ``moved_threshold`` (1 %) of their range. Reward: open ratio / threshold, at most 1.
+
+    Time limit: ``time_limit``, 15 s of simulated time (900 control steps at ``control_hz`` 60 Hz;
+    physics steps of 1/480 s, 8 per control step). The task ends no episode early; the environments
+    end one on success, and `opend run` and the environments on a MuJoCo instability warning.
+    """
 
     def __init__(self, episode: EpisodeSpec, config: TaskConfig = TaskConfig()):
         self.episode = episode

@@ -38,7 +38,7 @@ class GeneratorConfig:
     #: Handle population, matched to the real OpenD training cabinets as the planner measures them in
     #: depth (``tools/handle_stats.py``; real 10th / 50th / 90th percentiles: bar thickness 6.6 / 12.3 /
     #: 16.9 mm, stand-off gap 9.6 / 23.1 / 34.8 mm, bar length 57 / 154 / 542 mm, knobs 4 %, knob size
-    #: 37 / 41 / 44 mm). Generator 1 had 10-16 mm bars on 30-45 mm stand-offs, 8-30 cm long, 12 % knobs.
+    #: 37 / 41 / 44 mm).
     bar_diameter_range: tuple[float, float] = (0.005, 0.021)
     bar_gap_range: tuple[float, float] = (0.008, 0.038)
     #: Probabilities of (bar, arched, knob) per target type.
@@ -47,7 +47,8 @@ class GeneratorConfig:
     #: Share of straight bars that run most of their panel (long door pulls, full-width drawer bars).
     long_bar_share: float = 0.35
     long_bar_max: float = 0.80
-    #: A long bar's length between this fraction of its longest and the longest (version 4: 0).
+    #: A long bar's length between this fraction of its longest and the longest (real long pulls span
+    #: most of their panel).
     long_bar_min_frac: float = 0.6
     short_bar_min: float = 0.05
     #: Wide drawers (front wider than ``paired_pull_min_width``) carry two pulls, one per half, this often.
@@ -57,7 +58,7 @@ class GeneratorConfig:
     #: Door handles sit this far (m) from the door's free edge (double doors: handles 3-12 cm apart).
     door_handle_margin_range: tuple[float, float] = (0.015, 0.06)
     #: Door handles that are horizontal bars (real side-hinged doors of the OpenD training cabinets:
-    #: 47 of 126; generator 2 had 20 %). Of those, the real ones sit along the door's top edge (34 of
+    #: 47 of 126). Of those, the real ones sit along the door's top edge (34 of
     #: 47; else along its bottom edge, as on wall units), 2-5 cm from it, centred across the door
     #: about half of the time (24 of 47; else near its free edge).
     door_horizontal_share: float = 0.37
@@ -77,7 +78,7 @@ class GeneratorConfig:
     flap_bottom_range: tuple[float, float] = (1.57, 1.75)
     #: A horizontal door bar not centred across its door ends this far (m) from the door's free edge;
     #: on double doors and flap pairs the two pulls stand side by side (the real 10th percentile of the
-    #: free space from a handle to the nearest other one is 5 mm). Version 4 kept 25 mm.
+    #: free space from a handle to the nearest other one is 5 mm).
     door_bar_end_margin_range: tuple[float, float] = (0.004, 0.025)
     #: How a cabinet meets the floor, as shares of (bottom fronts down to the floor, fronts inset above
     #: the bottom panel, a low plinth in ``low_plinth_range``, a plinth or legs in ``plinth_range``).

@@ -317,9 +317,8 @@ class CLIPortSolver:
         self.thin = thin
         self.thin_fraction = thin_fraction
         #: ... and where they stack with a proposal (:func:`drawer_stack`: same column, same size):
-        #: one pull design down a stack of drawers, seen clearly by the map on one of them. On the
-        #: real train part and the procedural train split it changes nothing; the same rule for
-        #: Faster R-CNN lost a real train target and gained none, so that solver has no such rule.
+        #: one pull design down a stack of drawers, seen clearly by the map on one of them. Faster
+        #: R-CNN's solver has no such rule: there it did not help.
         self.thin_stack = thin_stack
         self.last_map: np.ndarray | None = None
 

@@ -3,9 +3,8 @@
 As in the OpenD paper: front-camera renders of the training cabinets at 256 x 256, the camera
 shifted by up to 10 cm along each axis, a 50 % chance of a random handle colour, randomised rooms
 (room type, furniture, floor, walls and lights all follow the scene seed) and a mild light scale;
-optionally views of the cabinet plain light grey (``DataConfig.plain_prob``, off by default: most
-real cabinets compile untextured, one light grey, but the shipped checkpoints were not improved by
-it); 1740 images by default, 80 % train / 20 % validation. Validation cabinets are held out whole
+optionally views of the cabinet plain light grey (``DataConfig.plain_prob``: most real cabinets compile
+untextured, one light grey; off by default, as the shipped checkpoints were trained); 1740 images by default, 80 % train / 20 % validation. Validation cabinets are held out whole
 (the split is by cabinet, drawn from a seeded hash), so validation measures unseen cabinets.
 
 On-disk format (version 1), one folder::
@@ -65,9 +64,8 @@ class DataConfig:
     max_shift: float = 0.10  # metres, per axis, uniform
     colour_prob: float = 0.5
     #: Chance that a view shows the cabinet plain: every visual geom one light grey (level drawn from
-    #: ``plain_grey``), as a PartNet-Mobility cabinet without textures compiles (measured on the
-    #: real train part's renders: 95 % of fronts unsaturated, luminance 0.27-0.35; generated
-    #: fronts: 42 % unsaturated, median luminance 0.21).
+    #: ``plain_grey``), as a PartNet-Mobility cabinet without textures compiles: real fronts render
+    #: nearly unsaturated and lighter than most generated ones, which a solver must also see.
     plain_prob: float = 0.0
     plain_grey: tuple[float, float] = (0.7, 1.0)
     val_fraction: float = 0.2

@@ -28,10 +28,9 @@ class MatchConfig:
     #: Only what depth confirms: the candidates are the depth proposals, each scored by the best
     #: detection covering it (else by the head on the proposal's own box), so an edge or a seam the
     #: detector takes for a handle is not one unless it stands proud of a panel like a handle.
-    #: Tuned on the real train part of the OpenD training cabinets and the procedural train split:
-    #: the detector's own handle probability rejects many real handles (it learnt generated ones),
-    #: while its drawer / door call on a depth proposal holds (real train part: 80.6 % located
-    #: without kinds, 85.9 % with them; 42.9 % on the detections alone).
+    #: Why: the detector learnt generated handles, so its own handle probability rejects many real
+    #: ones, while its drawer / door call on a box that depth proposes holds (chosen on the real
+    #: train part of the OpenD training cabinets and the procedural train split).
     depth_verified: bool = True
     #: With a kinds detector, read the kind calls together with the instruction
     #: (:func:`consistent_choice`) before falling back to the kind threshold and Algorithm 1's

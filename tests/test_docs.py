@@ -1,0 +1,75 @@
+"""The user pages stay true to the code: every relative link resolves, and docs/cli.md is current."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = sorted([ROOT / "README.md", ROOT / "CHANGELOG.md", *(ROOT / "docs").rglob("*.md"),
+                *(ROOT / "checkpoints").glob("*.md")])
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
+FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def anchors(page: Path) -> set[str]:
+    """GitHub's anchors of a page's headings: lower case, punctuation dropped, spaces to hyphens."""
+    out = set()
+    for line in FENCE.sub("", page.read_text()).splitlines():
+        if line.startswith("#"):
+            title = line.lstrip("#").strip().lower()
+            out.add(re.sub(r"[^\w\- ]", "", title).replace(" ", "-"))
+    return out
+
+
+def broken_links(page: Path) -> list[str]:
+    """The relative links of ``page`` whose file, or whose anchor in that file, does not exist."""
+    bad = []
+    for target in LINK.findall(FENCE.sub("", page.read_text())):
+        if re.match(r"[a-z]+:", target):  # http:, https:, mailto:
+            continue
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve() if path else page
+        if not dest.exists():
+            bad.append(f"{target} (no such file)")
+        elif anchor and dest.suffix == ".md" and anchor not in anchors(dest):
+            bad.append(f"{target} (no such heading)")
+    return bad
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_every_relative_link_resolves(page):
+    assert broken_links(page) == [], f"{page.relative_to(ROOT)}: broken links"
+
+
+def test_a_broken_link_is_found(tmp_path):
+    (tmp_path / "b.md").write_text("# Some heading\n")
+    page = tmp_path / "a.md"
+    page.write_text("[ok](b.md) [ok](b.md#some-heading) [bad](c.md) [bad](b.md#other)\n"
+                    "```\n[in a code block](d.md)\n```\n")
+    assert broken_links(page) == ["c.md (no such file)", "b.md#other (no such heading)"]
+
+
+def test_the_command_reference_is_current():
+    """docs/cli.md is `python tools/cli_reference.py`'s output for the commands as they are now."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "cli_reference.py"), "--check"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_the_command_reference_names_every_command():
+    from opend_mj.cli import COMMANDS
+
+    page = (ROOT / "docs" / "cli.md").read_text()
+    named = set(re.findall(r"^## `opend ([\w-]+)`", page, re.M))
+    assert named == set(COMMANDS)
+
+
+def test_no_user_page_is_over_300_lines():
+    long = {str(p.relative_to(ROOT)): n for p in PAGES if p.parent.name == "docs" and p.name != "cli.md"
+            and (n := len(p.read_text().splitlines())) > 300}
+    assert long == {}
