@@ -5,7 +5,7 @@ stands) and the panel the handle stands on (seen in depth).
 
 A pose "clears" when every collision geom of the hand stays ``margin`` (m) above the floor and
 ``margin`` in front of the panel. The planner uses it to choose how a hand comes at a handle close
-to the floor and to its door (:meth:`~opend_mj.policy.planner.grasp.GraspGeometry.choose_grasp`):
+to the floor and to its door (:meth:`~opend_mj.policy.planner.grasp.Grasping.choose_grasp`):
 the Franka gripper's body is 20 cm long across a horizontal bar, so a bar 4 cm above the floor
 and 2-3 cm off its door is taken from above, its fingers one in front of the bar and one behind it.
 """
