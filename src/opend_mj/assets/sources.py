@@ -166,7 +166,7 @@ def _load_urdf(urdf_path: Path, scale: float, limits: SourceLimits):
         raise SourceError(f"{urdf_path}: no mobility.urdf in this folder")
     try:
         tree = etree.parse(str(urdf_path))
-    except etree.XMLSyntaxError as exc:
+    except (etree.XMLSyntaxError, OSError, UnicodeError) as exc:  # lxml raises OSError for a bad encoding
         raise SourceError(f"{urdf_path}: malformed URDF XML ({exc})") from exc
     for tag in ("link", "joint"):
         seen: set[str] = set()
