@@ -381,7 +381,13 @@ def results_case(base: Path, work: Path, rng: random.Random) -> tuple[str, str]:
 
     path = work / "results.jsonl"
     shutil.copy(base, path)
-    done = "; ".join(r_mutate(path, rng) for _ in range(rng.choice([1, 1, 2])))
+    steps = []
+    for _ in range(rng.choice([1, 1, 2])):
+        try:
+            steps.append(r_mutate(path, rng))
+        except Exception as exc:  # noqa: BLE001 (a line the first mutation already broke: nothing to edit)
+            steps.append(f"skipped ({type(exc).__name__})")
+    done = "; ".join(steps)
     result = CliRunner().invoke(main, ["score", str(path)])
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         raise CaseFailed(f"opend score raised {type(result.exception).__name__}: {result.exception}")
@@ -422,7 +428,7 @@ def base_results(root: Path) -> Path:
 
 
 def run(cases: int, seed: int, results_cases: int, case_seconds: float, real: Path | None,
-        real_only: bool = False, log=print) -> tuple[Counter, list[str]]:
+        real_only: bool = False, log=print, only: int | None = None) -> tuple[Counter, list[str]]:
     """Run the cases; returns the outcome counts and the failures (one line each)."""
     from opend_mj.sim.feasibility import RoomCheck
 
@@ -434,7 +440,7 @@ def run(cases: int, seed: int, results_cases: int, case_seconds: float, real: Pa
         bases = base_sources(tmp / "bases", real, real_only)
         base_res = base_results(tmp)
         total = cases + results_cases
-        for k in range(total):
+        for k in range(total) if only is None else [only]:
             rng = random.Random(f"{seed}:{k}")
             work = tmp / f"case{k}"
             work.mkdir()
@@ -451,7 +457,8 @@ def run(cases: int, seed: int, results_cases: int, case_seconds: float, real: Pa
             except Exception as exc:  # noqa: BLE001 (an exception that escaped: the worst outcome)
                 import traceback
 
-                outcome, done = "FAILED", f"escaped {type(exc).__name__}: {exc} | {traceback.format_exc(limit=-3)}"
+                frames = None if only is not None else -3  # the whole stack when one case is rerun
+                outcome, done = "FAILED", f"escaped {type(exc).__name__}: {exc} | {traceback.format_exc(limit=frames)}"
             finally:
                 faulthandler.cancel_dump_traceback_later()
             seconds = time.perf_counter() - start
@@ -459,7 +466,7 @@ def run(cases: int, seed: int, results_cases: int, case_seconds: float, real: Pa
             if outcome == "FAILED":
                 failures.append(f"case {k} (seed {seed}, {kind}): {' '.join(done.split())}")
                 log(f"FAILED {failures[-1]}")
-            elif os.environ.get("FUZZ_VERBOSE"):
+            elif os.environ.get("FUZZ_VERBOSE") or only is not None:
                 log(f"case {k} {kind} {outcome} ({seconds:.1f} s): {done}")
             shutil.rmtree(work, ignore_errors=True)
     return outcomes, failures
@@ -487,10 +494,13 @@ def main(argv=None) -> int:
     parser.add_argument("--real", type=Path, default=None,
                         help="also mutate this PartNet-Mobility folder (e.g. ../shared/partnet-sample/45780)")
     parser.add_argument("--real-only", action="store_true", help="with --real: mutate that folder only")
+    parser.add_argument("--only", type=int, default=None, metavar="K",
+                        help="rerun case K alone (of the same --cases, --seed, --real), with its whole stack if it fails")
     args = parser.parse_args(argv)
     results_cases = args.results_cases if args.results_cases is not None else max(1, args.cases // 3)
     start = time.perf_counter()
-    outcomes, failures = run(args.cases, args.seed, results_cases, args.case_seconds, args.real, args.real_only)
+    outcomes, failures = run(args.cases, args.seed, results_cases, args.case_seconds, args.real, args.real_only,
+                             only=args.only)
     print(table(outcomes, failures))
     print(f"\n{time.perf_counter() - start:.1f} s")
     for f in failures:

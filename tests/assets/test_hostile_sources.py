@@ -167,3 +167,13 @@ def test_the_build_leaks_no_library_warning(door, tmp_path):
         assert flat.volume == 0.0
         src = _copy(door, tmp_path)
         assert compile_cabinet(src, tmp_path / "out", cache_dir=tmp_path / "cache").status == "built"
+
+
+def test_an_obj_with_short_vertex_lines_is_a_mesh_error(door, tmp_path):
+    """'v 1e300' (one coordinate) inserted in an OBJ: trimesh reads it and failed deep in its area
+    computation (a ValueError of shapes); now a mesh error naming the file (found by the fuzzer)."""
+    src = _copy(door, tmp_path)
+    obj = src / "textured_objs" / "original-2.obj"
+    obj.write_text(obj.read_text().replace("v ", "v 1e300\nv ", 1))
+    message = _refused(src, tmp_path, "mesh_error", "mesh is malformed")
+    assert str(obj) in message
