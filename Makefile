@@ -113,7 +113,7 @@ test: install
 ## The fuzzer, long: FUZZ_CASES mutated sources (procedural, plus the PartNet-Mobility sample when
 ## ../shared has it) and a third as many mutated results files; prints the outcome table, fails if any
 ## case ended otherwise than built or refused in one named line (tests/assets/test_fuzz.py runs a short one).
-FUZZ_CASES ?= 1000
+FUZZ_CASES ?= 600
 FUZZ_SEED  ?= 0
 FUZZ_REAL  ?= ../shared/partnet-sample/45780
 fuzz: install
