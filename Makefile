@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -112,6 +112,16 @@ TEST_WORKERS ?= 2
 test: install
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile; status=$$?; \
 	if [ $$status -eq 5 ]; then echo "no tests were collected"; fi; exit $$status
+
+## The fuzzer, long: FUZZ_CASES mutated sources (procedural, plus the PartNet-Mobility sample when
+## ../shared has it) and a third as many mutated results files; prints the outcome table, fails if any
+## case ended otherwise than built or refused in one named line (tests/assets/test_fuzz.py runs a short one).
+FUZZ_CASES ?= 600
+FUZZ_SEED  ?= 0
+FUZZ_REAL  ?= ../shared/partnet-sample/45780
+fuzz: install
+	$(BIN)/python tools/fuzz.py --cases $(FUZZ_CASES) --seed $(FUZZ_SEED) \
+		$(if $(wildcard $(FUZZ_REAL)/mobility.urdf),--real $(FUZZ_REAL))
 
 bench: install
 	$(BIN)/python tools/bench.py

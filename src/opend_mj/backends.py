@@ -25,6 +25,7 @@ Backends:
 
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import traceback
@@ -230,6 +231,11 @@ class RayBackend(Executor):
             return self.workers
 
     def _remote(self, fn):
+        """A Ray task calling ``fn`` (a function, or a ``functools.partial`` of one, which Ray cannot
+        make remote itself)."""
+        if isinstance(fn, functools.partial):
+            base = self._remote(_call_partial)
+            return _Bound(base, (fn.func, fn.args, fn.keywords))
         if fn not in self._remote_cache:
             self._remote_cache[fn] = self._ray.remote(num_cpus=1, max_retries=self.max_retries)(fn)
         return self._remote_cache[fn]
@@ -272,6 +278,22 @@ class RayBackend(Executor):
 
 
 _END = object()
+
+
+def _call_partial(bound, item):
+    """``functools.partial(func, *args, **keywords)(item)`` as a plain function (for Ray)."""
+    func, args, keywords = bound
+    return func(*args, item, **keywords)
+
+
+class _Bound:
+    """``remote.remote(item)`` of a Ray task that takes a bound partial first."""
+
+    def __init__(self, remote, bound):
+        self._remote, self._bound = remote, bound
+
+    def remote(self, item):
+        return self._remote.remote(self._bound, item)
 
 
 def make_executor(backend: str = "local", workers: int = 1, address: str | None = None,

@@ -3,11 +3,16 @@
 Thin by design: each command lives in `opend_mj.commands.<area>` and only parses arguments and calls
 library functions that the tests call too. Commands are imported lazily so that `opend --help` and
 light commands stay fast (mujoco, dm_control and torch are heavy imports).
+
+Every command answers bad input in one line: exit status 2 for a usage error (click's), 1 for a
+failure. An exception that no command turned into a message is shown as one line too (its type and
+message); `opend --debug <command>` (or OPEND_DEBUG=1) shows its traceback instead.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 
 import click
 
@@ -55,10 +60,27 @@ class LazyGroup(click.Group):
                 f"command {name!r} cannot be loaded: {type(exc).__name__}: {exc} (in {module_name})") from exc
         return getattr(module, attr)
 
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except Exception as exc:  # noqa: BLE001 (anything a command did not catch: one line, or --debug)
+            if ctx.params.get("debug") or os.environ.get("OPEND_DEBUG", "") not in ("", "0"):
+                raise
+            raise click.ClickException(one_line_error(exc) + " (opend --debug shows the traceback)") from None
+
+
+def one_line_error(exc: BaseException) -> str:
+    """``Type: message`` on one line (whitespace of a multi-line message collapsed)."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=__version__, package_name="opend-mj")
-def main() -> None:
+@click.option("--debug", is_flag=True, help="Show the traceback of an unexpected error (also: OPEND_DEBUG=1).")
+def main(debug: bool) -> None:
     """opend-mj: language-driven door and drawer opening on MuJoCo."""
 
 

@@ -54,7 +54,8 @@ class CompileResult:
 
     id: str
     status: str  # "built" | "cached" | "rejected"
-    reason: str | None = None  # rejection kind: urdf_error, mesh_error, language_invalid, no_target, physics_error
+    reason: str | None = None  # rejection kind: urdf_error, mesh_error, size_error, language_invalid, no_target,
+    # physics_error
     message: str | None = None
     seconds: float = 0.0
     info: dict = field(default_factory=dict)  # the cabinet.json content when built or cached
@@ -400,7 +401,10 @@ def compile_cabinet(
     out_dir.mkdir(parents=True)
     writer = _MjcfWriter(source, out_dir, config, cache_dir or default_cache_dir())
     try:
-        root = writer.write()
+        # trimesh computes a centre of mass with every volume, dividing by 0 for flat hulls (they weigh
+        # nothing and are skipped): numpy's warning about it would leak into the build's output
+        with np.errstate(divide="ignore", invalid="ignore"):
+            root = writer.write()
     except Exception as exc:  # decomposition on a broken mesh, qhull failures
         return rejected("mesh_error", f"{source_dir}: collision geometry failed ({type(exc).__name__}: {exc})")
     xml_path = out_dir / CABINET_XML

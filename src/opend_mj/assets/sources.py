@@ -9,6 +9,8 @@ re-centred: bounding box centred on x = y = 0, bottom at z = 0, front facing -x.
 from __future__ import annotations
 
 import hashlib
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +22,8 @@ from opend_mj.assets.meshes import MeshError, load_mesh_file
 class SourceError(ValueError):
     """A source folder that cannot be compiled; the message names the file and the problem.
 
-    `kind` is the rejection reason recorded in the manifest: "urdf_error" or "mesh_error".
+    `kind` is the rejection reason recorded in the manifest: "urdf_error", "mesh_error" or
+    "size_error" (a cabinet or part far outside furniture sizes).
     """
 
     def __init__(self, message: str, kind: str = "urdf_error"):
@@ -92,6 +95,51 @@ URDF_NAME = "mobility.urdf"
 CARCASS = "carcass"
 
 
+@dataclass(frozen=True)
+class SourceLimits:
+    """What a source may hold before it is refused: furniture sizes and sane numbers.
+
+    Lengths are in metres after scaling (`CompilerConfig.scale`). Not part of the compiler's cache key:
+    a source within these limits compiles exactly as before; one outside them is refused, not built.
+    """
+
+    #: Largest extent of the whole cabinet, or of any part (m): furniture, not a building.
+    max_extent: float = 5.0
+    #: Smallest largest-extent of a part with visual meshes (m): under 1 mm it is a speck, not a door.
+    min_part_size: float = 0.001
+    #: Largest translation of any `<origin>` (m).
+    max_offset: float = 50.0
+    #: Largest `<origin rpy>` angle (rad).
+    max_angle: float = 100.0
+    #: Largest revolute limit, either side of closed (rad): one full turn.
+    max_turn: float = 2 * math.pi
+    #: Smallest and largest magnitude of a `<mesh scale>` factor.
+    min_mesh_scale: float = 1e-3
+    max_mesh_scale: float = 1e3
+
+
+#: Link and joint names: what MuJoCo and dm_control accept as they are ('/' is dm_control's scope
+#: separator) and what reads well in records. Names outside this are refused with the name.
+SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,99}")
+#: Names that would collide with the compiler's own bodies or MuJoCo's world body.
+RESERVED_NAMES = (CARCASS, "world")
+
+#: URDF numeric attributes: element tag -> attribute -> allowed value counts.
+_NUMERIC = {
+    "origin": {"xyz": (3,), "rpy": (3,)},
+    "axis": {"xyz": (3,)},
+    "limit": {"lower": (1,), "upper": (1,), "effort": (1,), "velocity": (1,)},
+    "dynamics": {"damping": (1,), "friction": (1,)},
+    "mesh": {"scale": (1, 3)},
+    "mass": {"value": (1,)},
+    "inertia": {k: (1,) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")},
+    "box": {"size": (3,)},
+    "cylinder": {"radius": (1,), "length": (1,)},
+    "sphere": {"radius": (1,)},
+    "color": {"rgba": (4,)},
+}
+
+
 def source_files(path: Path) -> list[Path]:
     """The files whose content defines a source (for the content hash)."""
     files = [path / URDF_NAME]
@@ -110,7 +158,7 @@ def source_hash(path: Path) -> str:
     return digest.hexdigest()[:24]
 
 
-def _load_urdf(urdf_path: Path):
+def _load_urdf(urdf_path: Path, scale: float, limits: SourceLimits):
     import yourdfpy
     from lxml import etree
 
@@ -118,7 +166,7 @@ def _load_urdf(urdf_path: Path):
         raise SourceError(f"{urdf_path}: no mobility.urdf in this folder")
     try:
         tree = etree.parse(str(urdf_path))
-    except etree.XMLSyntaxError as exc:
+    except (etree.XMLSyntaxError, OSError, UnicodeError) as exc:  # lxml raises OSError for a bad encoding
         raise SourceError(f"{urdf_path}: malformed URDF XML ({exc})") from exc
     for tag in ("link", "joint"):
         seen: set[str] = set()
@@ -127,6 +175,8 @@ def _load_urdf(urdf_path: Path):
             if name in seen:
                 raise SourceError(f"{urdf_path}: duplicate {tag} name {name!r}")
             seen.add(name)
+            _check_name(urdf_path, tag, name)
+    _check_numbers(tree.getroot(), urdf_path, scale, limits)
     try:
         return yourdfpy.URDF.load(
             str(urdf_path), build_scene_graph=False, load_meshes=False,
@@ -161,13 +211,17 @@ def _material(visual) -> tuple[tuple[float, float, float, float], object | None,
     return (1.0, 1.0, 1.0, 1.0), image, np.asarray(uv, dtype=float)
 
 
-def read_source(path: Path, scale: float, max_faces: int | None = None) -> CabinetSource:
-    """Parse and validate a PartNet-Mobility folder; raise SourceError naming the file and problem."""
+def read_source(path: Path, scale: float, max_faces: int | None = None,
+                limits: SourceLimits = SourceLimits()) -> CabinetSource:
+    """Parse and validate a PartNet-Mobility folder; raise SourceError naming the file and problem.
+
+    Every number is checked where it is read (finite, within `limits`), and so is the size of the
+    result: a cabinet or part far outside furniture sizes is refused with its size."""
     path = Path(path)
     if not path.is_dir():
         raise SourceError(f"{path}: not a directory")
     urdf_path = path / URDF_NAME
-    urdf = _load_urdf(urdf_path)
+    urdf = _load_urdf(urdf_path, scale, limits)
     robot = urdf.robot
 
     links = {link.name: link for link in robot.links}
@@ -263,6 +317,7 @@ def read_source(path: Path, scale: float, max_faces: int | None = None) -> Cabin
                            semantics=_read_semantics(path), notes=notes)
     if not any(p.visuals for p in ordered):
         raise SourceError(f"{urdf_path}: no visual meshes at all")
+    _check_sizes(source, urdf_path, limits)
     lo, hi = source.bounds
     shift = np.array([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]])
     for part in ordered:
@@ -271,6 +326,104 @@ def read_source(path: Path, scale: float, max_faces: int | None = None) -> Cabin
         if part.joint is not None:
             part.joint.anchor = part.joint.anchor + shift
     return source
+
+
+def _check_name(urdf_path: Path, tag: str, name: str | None) -> None:
+    """Refuse a link or joint name that MuJoCo (or dm_control, or the compiler) would not take as it is."""
+    if not name:
+        raise SourceError(f"{urdf_path}: a {tag} has no name")
+    if name in RESERVED_NAMES:
+        raise SourceError(f"{urdf_path}: {tag} name {name!r} is reserved (the compiler's or MuJoCo's own body)")
+    if not SAFE_NAME.fullmatch(name):
+        bad = sorted({c for c in name if not re.fullmatch(r"[A-Za-z0-9_.\-]", c)}) or [name[:1]]
+        shown = name if len(name) <= 60 else name[:57] + "..."
+        raise SourceError(f"{urdf_path}: {tag} name {shown!r} is not a safe MuJoCo name (characters "
+                          f"{''.join(bad)!r}; use letters, digits, '_', '.', '-', at most 100)")
+
+
+def _where(el) -> str:
+    """Where an element sits in a URDF, for messages: e.g. "joint 'joint_0' <origin>"."""
+    parts = []
+    node = el
+    while node is not None and isinstance(node.tag, str) and node.tag != "robot":
+        name = node.get("name")
+        if node is el:
+            parts.append(f"<{node.tag}>")
+        elif node.tag in ("joint", "link"):
+            parts.append(f"{node.tag} {name!r}")
+        elif node.tag in ("visual", "collision", "inertial"):
+            parts.append(f"{node.tag} {name!r}" if name else node.tag)
+        node = node.getparent()
+    return " ".join(reversed(parts))
+
+
+def _check_numbers(root, urdf_path: Path, scale: float, limits: SourceLimits) -> None:
+    """Every numeric attribute of the URDF: numbers, finite, as many as the element takes, and not absurd."""
+    for el in root.iter(*_NUMERIC):
+        for attr, counts in _NUMERIC[el.tag].items():
+            text = el.get(attr)
+            if text is None:
+                continue
+
+            def bad(problem: str) -> SourceError:
+                return SourceError(f"{urdf_path}: {_where(el)} {attr}={text!r}: {problem}")
+
+            try:
+                values = [float(x) for x in text.split()]
+            except ValueError:
+                raise bad("not a number") from None
+            if len(values) not in counts:
+                raise bad(f"{len(values)} values, expected {' or '.join(map(str, counts))}")
+            if not all(math.isfinite(v) for v in values):
+                raise bad("not finite")
+            largest = max(abs(v) for v in values)
+            if el.tag == "origin" and attr == "xyz" and largest * scale > limits.max_offset:
+                raise bad(f"an offset of {largest * scale:.3g} m, beyond {limits.max_offset:g} m")
+            if el.tag == "origin" and attr == "rpy" and largest > limits.max_angle:
+                raise bad(f"an angle beyond {limits.max_angle:g} rad")
+            if el.tag == "mesh" and not all(limits.min_mesh_scale <= abs(v) <= limits.max_mesh_scale
+                                            for v in values):
+                raise bad(f"a scale factor outside {limits.min_mesh_scale:g} to {limits.max_mesh_scale:g}")
+            if el.tag in ("mass", "box", "cylinder", "sphere") and min(values) < 0:
+                raise bad("negative")
+            if el.tag == "inertia" and attr in ("ixx", "iyy", "izz") and values[0] < 0:
+                raise bad("a negative moment of inertia")
+            if el.tag == "limit" and attr in ("lower", "upper"):
+                kind = el.getparent().get("type") if el.getparent() is not None else None
+                if kind == "revolute" and largest > limits.max_turn:
+                    raise bad(f"beyond one turn ({limits.max_turn:.4g} rad)")
+                if kind == "prismatic" and largest * scale > limits.max_extent:
+                    raise bad(f"a travel of {largest * scale:.3g} m, beyond {limits.max_extent:g} m")
+
+
+def _check_sizes(source: CabinetSource, urdf_path: Path, limits: SourceLimits) -> None:
+    """Refuse a cabinet or part far outside furniture sizes, with its size (m)."""
+
+    def dims(size) -> str:
+        return " x ".join(f"{x:.3g}" for x in size) + " m"
+
+    lo, hi = source.bounds
+    if not np.all(np.isfinite([lo, hi])):
+        raise SourceError(f"{urdf_path}: the cabinet's geometry is not finite", "size_error")
+    if (hi - lo).max() > limits.max_extent:
+        raise SourceError(f"{urdf_path}: the cabinet measures {dims(hi - lo)}, beyond {limits.max_extent:g} m "
+                          f"(not furniture: a mesh, a scale or an origin out of proportion)", "size_error")
+    for part in source.parts:
+        if not part.visuals:
+            continue
+        pts = np.vstack([v.vertices for v in part.visuals])
+        size = pts.max(axis=0) - pts.min(axis=0)
+        if size.max() < limits.min_part_size:
+            raise SourceError(f"{urdf_path}: part {part.name} measures {dims(size)}, under "
+                              f"{limits.min_part_size * 1000:g} mm", "size_error")
+    for part in source.parts:
+        j = part.joint
+        if j is None or j.kind != "hinge":
+            continue
+        outside = np.maximum(0.0, np.maximum(lo - j.anchor, j.anchor - hi))
+        if float(np.linalg.norm(outside)) > limits.max_extent:
+            raise SourceError(f"{urdf_path}: joint {j.name}'s hinge axis passes {np.linalg.norm(outside):.3g} m "
+                              f"from the cabinet, beyond {limits.max_extent:g} m", "size_error")
 
 
 def _inside(root: Path, filename: str, urdf_path: Path) -> Path:

@@ -94,10 +94,13 @@ def _check_cabinets(ctx, param, value):
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
+@click.option("--episode-timeout", "episode_timeout", type=click.FloatRange(min=0), default=None, metavar="S",
+              help="Wall-clock limit of one episode in seconds (default 600; 0: none). An episode past it is "
+                   "recorded as an error (error_kind timeout) and the run goes on.")
 @click.pass_context
 def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, kind, seeds, video_dir,
         light_scale,
-        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait):
+        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait, episode_timeout):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -107,6 +110,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     import dataclasses
 
     from opend_mj.backends import BackendError
+    from opend_mj.evaluation.deadline import DEFAULT_EPISODE_TIMEOUT
     from opend_mj.evaluation.jobs import make_jobs
     from opend_mj.evaluation.lock import ResultsLocked
     from opend_mj.evaluation.pool import run_jobs
@@ -149,7 +153,8 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
         counts = run_jobs(jobs, out, workers=workers, backend=backend, address=address, wait=wait,
-                          on_wait=lambda message: click.echo(f"waiting: {message}", err=True))
+                          on_wait=lambda message: click.echo(f"waiting: {message}", err=True),
+                          episode_timeout=DEFAULT_EPISODE_TIMEOUT if episode_timeout is None else episode_timeout or None)
     except ResultsLocked as exc:
         click.echo(f"error: {exc}", err=True)
         raise SystemExit(2) from None
@@ -219,8 +224,16 @@ def score(results, csv_path, plot_path, summary_path, manifest_path):
         write_csv,
     )
 
-    records = load_records(results)
-    click.echo(report_markdown(records))
+    named = ", ".join(str(p) for p in results)
+    try:
+        records = load_records(results)
+    except ValueError as exc:  # a corrupt line, or a line that is no episode record: named with its file
+        raise click.ClickException(str(exc)) from None
+    try:
+        table = report_markdown(records)
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:  # a field of the wrong type
+        raise click.ClickException(f"{named}: a record the scorer cannot read ({type(exc).__name__}: {exc})") from None
+    click.echo(table)
     if csv_path:
         write_csv(records, csv_path)
     if plot_path:

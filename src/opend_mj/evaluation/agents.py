@@ -116,17 +116,18 @@ def episode_seed(job: EpisodeJob) -> int:
     return zlib.crc32(f"{job.cabinet}/{job.joint}/{job.hand}/{job.seed}".encode())
 
 
-def run_group(jobs) -> list[dict]:
-    """The unit of work of `opend run`: a group of episodes sharing a scene, by agent or planner."""
+def run_group(jobs, episode_timeout: float | None = None) -> list[dict]:
+    """The unit of work of `opend run`: a group of episodes sharing a scene, by agent or planner,
+    each within ``episode_timeout`` seconds of wall-clock time (None: no limit)."""
     if jobs and jobs[0].policy:
-        return run_agent_group(jobs)
-    return run_episode_group(jobs)
+        return run_agent_group(jobs, episode_timeout)
+    return run_episode_group(jobs, timeout=episode_timeout)
 
 
-def run_agent_group(jobs) -> list[dict]:
+def run_agent_group(jobs, episode_timeout: float | None = None) -> list[dict]:
     """Like `runner.run_episode_group` (the same scene sharing and fresh scene after a failure), with
     the agent of the jobs' ``policy`` acting."""
-    return run_episode_group(jobs, episode=_agent_episode)
+    return run_episode_group(jobs, episode=_agent_episode, timeout=episode_timeout)
 
 
 def _agent_episode(job: EpisodeJob, env) -> dict:

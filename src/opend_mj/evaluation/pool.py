@@ -3,15 +3,20 @@
 Reliability: an episode never stops the run. A cabinet whose files are missing or corrupt (checked
 cheaply in the parent: ``cabinet.json`` parses, ``cabinet.xml`` is well-formed XML; deeper faults
 surface in the worker as ``CabinetError``) gives error records with ``error_reason`` naming the file;
-a dead worker's episodes become error records and the rest go on. Error records count as done on
-resume (delete their lines to retry them).
+an episode past its wall-clock limit (``episode_timeout``) gives an error record of kind ``timeout``.
+Agents (``EpisodeJob.policy``) always run in worker processes, even with one worker: a worker that
+dies (an agent that calls ``os._exit`` or crashes the interpreter) costs its episode only, since the
+episodes of its group are run again one by one. Error records count as done on resume (delete their
+lines to retry them).
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from opend_mj.evaluation.agents import run_group
+from opend_mj.evaluation.deadline import DEFAULT_EPISODE_TIMEOUT
 from opend_mj.evaluation.episode import EpisodeJob, episode_key
 from opend_mj.evaluation.jobs import group_jobs
 from opend_mj.evaluation.lock import ResultsLock
@@ -44,7 +49,7 @@ def check_cabinet_files(cabinet_dir: str | Path) -> None:
 
 def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool = True,
              backend: str = "local", address: str | None = None, executor=None, sort: bool = True,
-             wait: bool = False, on_wait=None) -> dict:
+             wait: bool = False, on_wait=None, episode_timeout: float | None = DEFAULT_EPISODE_TIMEOUT) -> dict:
     """Run the jobs not yet in ``out`` (resumable) and append their records. Returns counts.
 
     ``backend``: ``"local"`` (this process when ``workers == 1``, else a spawn pool of ``workers``)
@@ -53,12 +58,15 @@ def run_jobs(jobs: list[EpisodeJob], out: Path, workers: int = 1, progress: bool
 
     The run owns ``out`` while it runs (`evaluation.lock`): if another run holds it, this raises
     `ResultsLocked`, or with ``wait`` waits for it (and then skips the episodes it wrote).
+
+    ``episode_timeout``: each episode's wall-clock limit in seconds (None: none); it does not change
+    the record of an episode that ends in time.
     """
     with ResultsLock(out, wait=wait, on_wait=on_wait):
-        return _run_jobs(jobs, out, workers, progress, backend, address, executor, sort)
+        return _run_jobs(jobs, out, workers, progress, backend, address, executor, sort, episode_timeout)
 
 
-def _run_jobs(jobs, out, workers, progress, backend, address, executor, sort) -> dict:
+def _run_jobs(jobs, out, workers, progress, backend, address, executor, sort, episode_timeout) -> dict:
     from tqdm import tqdm
 
     from opend_mj.backends import make_executor
@@ -105,10 +113,26 @@ def _run_jobs(jobs, out, workers, progress, backend, address, executor, sort) ->
                 if progress:
                     bar.write(f"skipped {j.cabinet}/{j.joint}: {error_reason(exc)}")
         if runnable:
-            ex = executor if executor is not None else make_executor(backend, workers, address,
-                                                                     initializer=_worker_init)
+            if executor is not None:
+                ex = executor
+            elif backend == "local" and workers <= 1 and any(j.policy for j in runnable):
+                from opend_mj.backends import ProcessPoolBackend
+
+                ex = ProcessPoolBackend(1, initializer=_worker_init)  # an agent never runs in this process
+            else:
+                ex = make_executor(backend, workers, address, initializer=_worker_init)
+            fn = functools.partial(run_group, episode_timeout=episode_timeout)
             try:
-                for group, recs, err in ex.imap_unordered(run_group, group_jobs(runnable)):
+                alone = []  # episodes of groups whose worker failed: each is run again on its own
+                for group, recs, err in ex.imap_unordered(fn, group_jobs(runnable)):
+                    if err is not None and len(group) > 1:
+                        alone += [(j,) for j in group]
+                        continue
+                    if err is not None:
+                        recs = [{**error_record(j, err), "wall_seconds": None} for j in group]
+                    for rec in recs:
+                        record(rec)
+                for group, recs, err in ex.imap_unordered(fn, alone):
                     if err is not None:
                         recs = [{**error_record(j, err), "wall_seconds": None} for j in group]
                     for rec in recs:

@@ -28,19 +28,23 @@ def load_results(path: Path, repair: bool = True) -> list[dict]:
     records: list[dict] = []
     good_end = 0
     pos = 0
+    number = 0  # of the line being read, from 1
     while pos < len(data):
         nl = data.find(b"\n", pos)
         if nl < 0:  # last line without newline: torn
             break
         line = data[pos:nl]
         pos = nl + 1
+        number += 1
         if line.strip():
             try:
-                records.append(json.loads(line))
-            except json.JSONDecodeError:
+                record = json.loads(line)
+            except (json.JSONDecodeError, UnicodeDecodeError):
                 if pos >= len(data):  # a torn last line that happens to end in a newline
                     break
-                raise ValueError(f"{path}: corrupt line in the middle of the file at byte {pos}")
+                raise ValueError(f"{path}: corrupt line {number} in the middle of the file at byte {pos}") from None
+            _check_record(record, path, number)
+            records.append(record)
         good_end = pos
     if repair and good_end < len(data):
         with open(path, "r+b") as f:
@@ -48,6 +52,23 @@ def load_results(path: Path, repair: bool = True) -> list[dict]:
             f.flush()
             os.fsync(f.fileno())
     return records
+
+
+def _check_record(record, path: Path, line: int) -> None:
+    """A parsed line must be an episode record: a JSON object with the fields of its key."""
+    from opend_mj.evaluation.episode import EPISODE_FIELDS, _REQUIRED
+
+    if not isinstance(record, dict):
+        raise ValueError(f"{path}: line {line} is not an episode record (a JSON {type(record).__name__})")
+    missing = [f.name for f in EPISODE_FIELDS if f.in_key and f.default is _REQUIRED and f.name not in record]
+    if missing:
+        raise ValueError(f"{path}: line {line} is not an episode record (no {', '.join(missing)})")
+    for f in EPISODE_FIELDS:
+        if f.in_key and f.name in record:
+            try:
+                f.normalise(record[f.name])
+            except (TypeError, ValueError):
+                raise ValueError(f"{path}: line {line}: {f.name} {record[f.name]!r} is not valid") from None
 
 
 class ResultsWriter:

@@ -5,7 +5,8 @@ builds the task, renders the one front RGB-D image, runs the planner and records
 Ground truth is used here only to label results (failure stage, success); the planner never sees it
 (except through the ``oracle`` solver, whose whole point is to hand it the true box).
 
-Reliability: an episode never raises. A task that raises (e.g. a non-finite action: ``ValueError: action has non-finite values``)
+Reliability: an episode never raises. An episode that runs past its wall-clock limit
+(``episode_timeout``, `evaluation.deadline`) gives an error record of kind ``timeout``. A task that raises (e.g. a non-finite action: ``ValueError: action has non-finite values``)
 gives an error record; a MuJoCo instability (BADQACC/BADQPOS/BADQVEL, or NaN state) ends the episode
 as a failure with ``failed_stage = "physics"`` and the warnings in ``physics_warnings``. Error
 records count as done on resume (delete their lines to retry them).
@@ -23,33 +24,36 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 
+from opend_mj.evaluation.deadline import EpisodeTimeout, episode_deadline  # noqa: E402
 from opend_mj.evaluation.episode import EpisodeJob, record_fields, scene_seed  # noqa: E402
 from opend_mj.evaluation.grading import failure_stage  # noqa: E402
 from opend_mj.evaluation.probes import HandReach, PenetrationProbe, VideoRecorder  # noqa: E402
 
 
-def run_episode(job: EpisodeJob, env=None, episode=None) -> dict:
+def run_episode(job: EpisodeJob, env=None, episode=None, timeout: float | None = None) -> dict:
     """Run one episode; returns its record (never raises: errors become an ``error`` record).
 
     ``episode(job, env) -> record``: who acts (default: the planner; `evaluation.agents` passes an
-    agent's episode)."""
+    agent's episode). ``timeout``: its wall-clock limit in seconds (None: none)."""
     t0 = time.perf_counter()
     try:
-        record = (episode or _run_episode)(job, env)
-    except Exception as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
+        with episode_deadline(timeout):
+            record = (episode or _run_episode)(job, env)
+    except (Exception, EpisodeTimeout) as exc:  # noqa: BLE001 (an episode's failure must not stop the run)
         record = error_record(job, exc)
     out = {**record_fields(job), **record}
     out["wall_seconds"] = round(time.perf_counter() - t0, 3)
     return out
 
 
-def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob], episode=None) -> list[dict]:
+def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob], episode=None,
+                      timeout: float | None = None) -> list[dict]:
     """Run episodes that share one `scene_key` on one scene, built once (the unit of work of a run).
 
     Building a scene (room, cabinet, hand, compile) costs about as much as simulating an episode;
     the episodes of one cabinet's targets differ only in the target and the instruction, and each
-    starts from a full reset, so their records are the same as with a scene each. ``episode``: as in
-    `run_episode`.
+    starts from a full reset, so their records are the same as with a scene each. ``episode`` and
+    ``timeout`` (each episode's wall-clock limit): as in `run_episode`.
     """
     records = []
     env = None
@@ -62,10 +66,10 @@ def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob], episode=N
                 records.append({**error_record(job, exc), "wall_seconds": round(time.perf_counter() - t0, 3)})
                 continue
             build_s = time.perf_counter() - t0
-            rec = run_episode(job, env, episode)
+            rec = run_episode(job, env, episode, timeout)
             rec["wall_seconds"] = round(rec["wall_seconds"] + build_s, 3)
         else:
-            rec = run_episode(job, env, episode)
+            rec = run_episode(job, env, episode, timeout)
         records.append(rec)
         if rec.get("failed_stage") == "physics" or "error" in rec:
             env = None  # a diverged or failed episode: the next one gets a fresh scene
@@ -97,6 +101,10 @@ def _error_kind(exc) -> str:
 
     if isinstance(exc, CabinetError) or (isinstance(exc, str) and "CabinetError" in exc):
         return "cabinet"
+    if isinstance(exc, EpisodeTimeout):
+        return "timeout"
+    if isinstance(exc, str) and "BrokenProcessPool" in exc:
+        return "worker_died"
     if isinstance(exc, ValueError) and "action" in str(exc):
         return "action"
     return "exception"

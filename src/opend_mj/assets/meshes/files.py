@@ -38,7 +38,12 @@ def load_mesh_file(path: Path, max_faces: int | None = None) -> list[tuple[trime
     if not parts:
         raise MeshError(f"{path}: mesh is empty (no faces)")
     for g in parts:
-        if not np.all(np.isfinite(g.vertices)):
+        vertices, faces = np.asarray(g.vertices), np.asarray(g.faces)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+            # e.g. "v 1" lines: trimesh reads vertices of one coordinate and fails later, deep inside
+            raise MeshError(f"{path}: mesh is malformed (vertices of shape {vertices.shape}, faces of shape "
+                            f"{faces.shape}; expected 3 coordinates and 3 corners)")
+        if not np.all(np.isfinite(vertices)):
             raise MeshError(f"{path}: mesh has NaN or infinite vertex coordinates")
     _attach_textures(path, parts)
     area = sum(float(g.area) for g in parts)

@@ -70,8 +70,12 @@ def pieces(vertices: np.ndarray, faces: np.ndarray, return_index: bool = False) 
 
 
 def trimesh_hull(points: np.ndarray) -> trimesh.Trimesh:
-    """trimesh's convex hull of a point set (exact volume, area and mass properties)."""
-    return trimesh.convex.convex_hull(points, qhull_options="QbB Pp QJ")
+    """trimesh's convex hull of a point set (exact volume, area and mass properties).
+
+    trimesh checks the hull's orientation by its volume, and computes a centre of mass with it that
+    divides by 0 for a flat hull; that centre is never used, so numpy's warning is silenced here."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return trimesh.convex.convex_hull(points, qhull_options="QbB Pp QJ")
 
 
 class QHull:

@@ -22,9 +22,12 @@ def mass_properties(hulls: list[Hull], density: float) -> tuple[float, np.ndarra
         else:
             mesh = trimesh_hull(hull.vertices)
             mesh.density = density
-            mass = float(mesh.mass)
-            centre = np.asarray(mesh.center_mass)
-            inertia_c = np.asarray(mesh.moment_inertia)
+            # trimesh divides by the volume for the centre of mass even when it is 0 (a flat hull):
+            # that centre is never used (the hull is skipped below), so its warning says nothing
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mass = float(mesh.mass)
+                centre = np.asarray(mesh.center_mass)
+                inertia_c = np.asarray(mesh.moment_inertia)
         if mass <= 0:
             continue
         total_mass += mass
