@@ -4,7 +4,6 @@ the run goes on and records each with its reason. Bad input to any command is an
 
 from __future__ import annotations
 
-import json
 import textwrap
 from pathlib import Path
 
