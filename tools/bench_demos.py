@@ -88,7 +88,9 @@ def section(cabinets: Path, episodes: int, steps: int) -> str:
             f"demonstrations (`opend demos`: allegro, the first {episodes} train targets of the generated "
             f"cabinets, one seed), then `opend train-policy` on the {kept} demonstrations of the 1-worker run "
             f"(the default model, {steps} steps). The 1-worker run follows an untimed warm-up episode; "
-            f"each of the 2 worker processes' first episode also pays for its imports (about 2 s). Load average (1 min) before / after: {{load}}.", "",
+            f"each of the 2 worker processes' first episode also pays for its imports (about 2 s). Load "
+            f"average (1 min) before / after: {{load}}; above about 1, other work shared the cores and the "
+            f"rates understate what an idle machine gives.", "",
             "| figure | value |", "|---|---|", *rows, ""]
     return "\n".join(text)
 

@@ -19,8 +19,8 @@ actions are stored as ``actions_executed``, which is what a replay steps.
 The file is the robomimic / LIBERO HDF5 layout of `opend_mj.apps.demos` (see there and the docs
 page ``docs/demonstrations.md`` for the keys). Successful episodes are kept by default; with
 ``keep_failures`` the failed ones too, labelled (``success``, ``failed_stage``). Every episode tried
-is logged to ``<out>.episodes.jsonl`` (its key, success, whether kept), which is what a resumed
-recording skips. Episodes run in ``spawn`` worker processes (an EGL context does not survive fork).
+is logged to ``<out>.episodes.jsonl`` (its key, success, whether kept); a resumed recording skips
+the demos in the file and the failed episodes of the log (:func:`tried_keys`). Episodes run in ``spawn`` worker processes (an EGL context does not survive fork).
 """
 
 from __future__ import annotations
