@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env clean
+.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -156,3 +156,9 @@ bench-task: install
 ## (also in `make bench`).
 bench-env: install
 	$(BIN)/python tools/bench_env.py --cabinets $(CABINETS)
+
+## Demonstrations recorded per minute (1 and 2 workers), bytes per demonstration, training samples per
+## second and the peak memory of training (CPU, 1 thread); the section is written into BENCHMARKS.md
+## (also in `make bench`).
+bench-demos: install
+	$(BIN)/python tools/bench_demos.py --cabinets $(CABINETS) --write BENCHMARKS.md

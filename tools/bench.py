@@ -11,8 +11,10 @@ Sections (each a subprocess, so that its peak memory can be read):
   envs    - tools/bench_env.py: raw mj_step ceiling, state steps/s and their ratio to it, the
             shared-memory vector env with 1 and 2 processes, RGB-D at 128 and 256 against the renderer
             (interleaved chunks, wall and CPU time)
+  demos   - tools/bench_demos.py: demonstrations recorded per minute (1 and 2 workers), bytes per
+            demonstration, training samples per second and the peak memory of training
 
-    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs] [--out BENCHMARKS.md]
+    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs,demos] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -146,7 +148,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=ROOT / "BENCHMARKS.md")
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
-    parser.add_argument("--sections", default="assets,hands,task,episodes,envs")
+    parser.add_argument("--sections", default="assets,hands,task,episodes,envs,demos")
     parser.add_argument("--quick", action="store_true", help="smaller counts (a few minutes in all)")
     args = parser.parse_args()
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -202,6 +204,10 @@ def main() -> None:
         out, secs, mem = _run(["tools/bench_env.py", "--cabinets", str(args.cabinets),
                                "--steps", "300" if quick else "1500", "--image-steps", "100" if quick else "300"])
         body += ["## Environments (gymnasium)", "", _tables(out), "", f"Peak memory {mem:.0f} MiB.", ""]
+    if "demos" in sections:
+        out, secs, mem = _run(["tools/bench_demos.py", "--cabinets", str(args.cabinets),
+                               "--episodes", "8" if quick else "24"])
+        body += [out.strip(), ""]  # the section as tools/bench_demos.py prints it
     load_after = os.getloadavg()
     header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "
                       f"on {os.cpu_count()} cores: above about 1, other work shared the cores and the worker "

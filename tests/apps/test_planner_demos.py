@@ -42,7 +42,7 @@ def test_demos_read_back_with_the_documented_keys(demos_file):
         assert np.abs(d.extra["actions_delta"]).max() <= 1.0
         for key in DEMO_OBS_KEYS:
             assert len(d.obs[key]) == t, key
-        assert np.allclose(np.diff(d.obs["time"][:, 0]), 1 / 60)
+        assert np.allclose(np.diff(d.obs["time"][:, 0]), 1 / 60, atol=1e-5)  # stored as float32
         assert d.obs["handle_features"].shape == (t, PERCEPT_DIM) and np.isfinite(d.obs["handle_features"]).all()
         assert d.obs["instruction"].shape == (t, 14) and (d.obs["instruction"].sum(axis=1) == 3).all()
         for key in ("instruction", "cabinet", "target_joint", "target_type", "hand", "solver", "split", "seed",
@@ -52,7 +52,8 @@ def test_demos_read_back_with_the_documented_keys(demos_file):
 
 
 def test_delta_actions_are_the_absolute_ones_in_the_gym_action_space(demos_file):
-    """Applied to the commanded pose before each step, the delta action gives the absolute one."""
+    """Applied to the commanded pose before each step, the delta action gives the absolute one (to the
+    float32 the file stores both in)."""
     from opend_mj.apps.demos import read_demos, task_config_from_args
     from opend_mj.sim.envs import ActionAdapter
 
@@ -66,9 +67,9 @@ def test_delta_actions_are_the_absolute_ones_in_the_gym_action_space(demos_file)
     for t in np.flatnonzero(inside)[::25]:
         back = adapter.from_delta(delta[t], d.obs["mocap_pos"][t], d.obs["mocap_quat"][t])
         a = d.actions[t]
-        assert np.allclose(back[:3], a[:3], atol=1e-9)
-        assert min(np.abs(back[3:7] - a[3:7]).max(), np.abs(back[3:7] + a[3:7]).max()) < 1e-6
-        assert np.allclose(back[7:], np.clip(a[7:], adapter.finger_low, adapter.finger_high), atol=1e-9)
+        assert np.allclose(back[:3], a[:3], atol=1e-5)
+        assert min(np.abs(back[3:7] - a[3:7]).max(), np.abs(back[3:7] + a[3:7]).max()) < 1e-5
+        assert np.allclose(back[7:], np.clip(a[7:], adapter.finger_low, adapter.finger_high), atol=1e-5)
 
 
 def test_replaying_a_demo_reproduces_its_open_ratio(demos_file):
@@ -90,6 +91,28 @@ def test_demos_resume_and_refuse_bad_output(demos_file, tmp_path):
     assert again.exit_code == 0 and "0 episodes recorded, 2 already tried" in again.output
     bad = CliRunner().invoke(main, args[:-3] + ["--out", str(tmp_path / "x.json")])
     assert bad.exit_code != 0 and "HDF5" in bad.output
+
+
+def test_a_killed_recording_resumes_without_losing_or_repeating_episodes(demos_file, tmp_path):
+    """A kill after the first demo reached the file, while the log held the second episode as kept
+    (its demo never written) and a torn line: the resumed run records the second episode only, and
+    the file ends with the uninterrupted run's episodes, each once."""
+    from opend_mj.apps.demos import append_demos, read_demos
+    from opend_mj.apps.planner_demos import log_path
+
+    full, args = demos_file
+    attrs, demos = read_demos(full)
+    keys = [d.attrs["job_key"] for d in demos]
+    out = tmp_path / "killed.hdf5"
+    demos[0].env_args = json.loads(attrs["env_args"])
+    append_demos(out, demos[:1])
+    lines = log_path(full).read_text().splitlines()
+    log_path(out).write_text(lines[1] + "\n" + lines[0][:25])
+    result = CliRunner().invoke(main, args[:-3] + ["--out", str(out), "--no-progress"])
+    assert result.exit_code == 0 and "1 episodes recorded, 1 already tried" in result.output, result.output
+    resumed = [d.attrs["job_key"] for d in read_demos(out)[1]]
+    assert resumed == keys  # the same episodes, none repeated, in the uninterrupted order
+    assert all(json.loads(line) for line in log_path(out).read_text().splitlines())
 
 
 def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path):
@@ -263,9 +286,9 @@ def test_dart_noise_labels_are_the_planners_clean_actions(small_dataset, tmp_pat
         assert noise["pos"] == 0.004 and noise["tau"] == 0.3
         # the label of a step is the planner's reply to the (perturbed) state it saw: the commanded
         # pose before a step is the previous step's *sent* action (where the mocap speed limit did
-        # not cut it short), not its label
+        # not cut it short), not its label (to the float32 the file stores mocap_pos in)
         def matches(actions):
-            return float(np.mean(np.abs(d.obs["mocap_pos"][1:] - actions[:-1, :3]).max(axis=1) < 1e-9))
+            return float(np.mean(np.abs(d.obs["mocap_pos"][1:] - actions[:-1, :3]).max(axis=1) < 1e-6))
 
         assert matches(sent) > 0.8 and matches(d.actions) < 0.05
         r = replay_demo(d, attrs["env_args"])

@@ -7,13 +7,13 @@ The robomimic / LIBERO layout, in HDF5 (``.hdf5`` / ``.h5``, needs ``h5py``) or 
 
     data/                                   group; attrs: total (samples over all demos),
                                             env_args (JSON, below), format ("opend-mj-demos"),
-                                            format_version (1)
+                                            format_version (2)
     data/demo_<i>/actions                   float64 (T, A): the task action of step t
                                             [root x, y, z, root quat w, x, y, z, finger targets...]
-    data/demo_<i>/obs/hand_joint_pos        float64 (T, n_fingers): finger joint positions before step t
-    data/demo_<i>/obs/root_pos              float64 (T, 3): hand root position (world) before step t
-    data/demo_<i>/obs/root_quat             float64 (T, 4): hand root orientation (w x y z)
-    data/demo_<i>/obs/open_ratio            float64 (T,): target open ratio before step t
+    data/demo_<i>/obs/hand_joint_pos        float32 (T, n_fingers): finger joint positions before step t
+    data/demo_<i>/obs/root_pos              float32 (T, 3): hand root position (world) before step t
+    data/demo_<i>/obs/root_quat             float32 (T, 4): hand root orientation (w x y z)
+    data/demo_<i>/obs/open_ratio            float32 (T,): target open ratio before step t
     data/demo_<i>/obs/rgb                   uint8 (T, H, W, 3), only when the env config has RGB-D on
     data/demo_<i>/final/<key>               the same observation keys after the last step (1 sample)
     data/demo_<i>/<name>                    other per-step arrays of a recorder (``Demo.extra``), e.g.
@@ -27,6 +27,13 @@ The robomimic / LIBERO layout, in HDF5 (``.hdf5`` / ``.h5``, needs ``h5py``) or 
 ``env_args`` (JSON): ``{"env_name": "OpenCabinet", "type": "opend-mj",
 "env_kwargs": {<TaskConfig fields>}}``: every TaskConfig field, so the environment is re-created
 exactly. Demos are numbered in the order they were appended, from 0.
+
+Format version 2 stores every floating-point array as float32, except the actions a replay steps
+(:data:`FLOAT64_KEYS`: ``actions``, ``actions_executed``), which stay float64 so that a replay is
+exact; integer, bool and uint8 (image) arrays keep their types. HDF5 datasets are chunked and
+gzip-compressed (with the byte shuffle), ``.npz`` files are written with ``np.savez_compressed``.
+Files of another format or version are refused (:class:`DemoFileError`, one line naming the file):
+re-record them.
 
 In ``.npz`` files, group attrs are stored as one JSON string under ``<group>/.attrs``
 (``data/.attrs``, ``data/demo_0/.attrs``), and arrays under their paths above.
@@ -42,6 +49,8 @@ import dataclasses
 import json
 import os
 import time
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,7 +59,16 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np  # noqa: E402
 
 FORMAT = "opend-mj-demos"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Arrays kept in float64: the actions a replay steps (float32 would end a replay elsewhere).
+FLOAT64_KEYS = ("actions", "actions_executed")
+#: HDF5 dataset options of format 2: chunked, byte-shuffled, gzip level 4 (small arrays stay contiguous).
+_H5_COMPRESS = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+_H5_MIN_COMPRESS_BYTES = 1024
+
+
+class DemoFileError(ValueError):
+    """A demonstrations file that cannot be used: its message is one line naming the file and the problem."""
 OBS_KEYS = ("hand_joint_pos", "root_pos", "root_quat", "open_ratio")
 ENV_NAME = "OpenCabinet"
 
@@ -180,22 +198,72 @@ def _h5py():
     return h5py
 
 
+def check_header(path, file_attrs: dict) -> dict:
+    """``file_attrs`` if they are of this format and version, else :class:`DemoFileError`."""
+    fmt, version = file_attrs.get("format"), file_attrs.get("format_version")
+    if fmt != FORMAT:
+        raise DemoFileError(f"{path}: not an opend-mj demonstrations file (format {fmt!r}, expected {FORMAT!r})")
+    if version != FORMAT_VERSION:
+        raise DemoFileError(f"{path}: demonstrations format version {version}, this opend-mj reads version "
+                            f"{FORMAT_VERSION} only (float32, compressed); re-record it (`opend demos` or "
+                            f"`opend teleop --record`) into a new file")
+    return file_attrs
+
+
+def _damaged(path, exc: BaseException) -> DemoFileError:
+    reason = " ".join(str(exc).split()) or type(exc).__name__
+    return DemoFileError(f"{path}: truncated or damaged demonstrations file ({reason[:160]}); "
+                         f"copy it again or re-record it")
+
+
+def open_demo_file(path):
+    """The open HDF5 file of a demo file (``h5py.File``, read only) after :func:`check_header`; a
+    missing, truncated or foreign file raises FileNotFoundError / :class:`DemoFileError` naming it."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no demonstrations file")
+    h5py = _h5py()
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise _damaged(path, exc) from None
+    try:
+        if "data" not in f:
+            raise DemoFileError(f"{path}: not an opend-mj demonstrations file (no data group)")
+        check_header(path, {k: _h5_value(v) for k, v in f["data"].attrs.items()})
+    except BaseException:
+        f.close()
+        raise
+    return f
+
+
+def _demo_names(g) -> list[str]:
+    return sorted((k for k in g.keys() if k.startswith("demo_")), key=lambda s: int(s.split("_")[1]))
+
+
 def read_demos(path) -> tuple[dict, list[Demo]]:
-    """(file-level attrs, demos in index order) of a demo file."""
+    """(file-level attrs, demos in index order) of a demo file (of format version 2: else
+    :class:`DemoFileError`, as for a truncated file)."""
     path = Path(path)
     if _is_hdf5(path):
-        h5py = _h5py()
-        with h5py.File(path, "r") as f:
+        with open_demo_file(path) as f:
             g = f["data"]
-            file_attrs = {k: _h5_value(v) for k, v in g.attrs.items()}
-            demos = []
-            for name in sorted(g.keys(), key=lambda s: int(s.split("_")[1])):
-                d = g[name]
-                demos.append(_h5_demo(d))
+            try:
+                file_attrs = {k: _h5_value(v) for k, v in g.attrs.items()}
+                demos = [_h5_demo(g[name]) for name in _demo_names(g)]
+            except (OSError, KeyError, RuntimeError) as exc:
+                raise _damaged(path, exc) from None
         return file_attrs, demos
-    with np.load(path, allow_pickle=False) as z:
-        files = {k: z[k] for k in z.files}
-    file_attrs = json.loads(str(files["data/.attrs"]))
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no demonstrations file")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            files = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise _damaged(path, exc) from None
+    if "data/.attrs" not in files:
+        raise DemoFileError(f"{path}: not an opend-mj demonstrations file (no data/.attrs)")
+    file_attrs = check_header(path, json.loads(str(files["data/.attrs"])))
     names = sorted({k.split("/")[1] for k in files if k.startswith("data/demo_")}, key=lambda s: int(s.split("_")[1]))
     demos = []
     for name in names:
@@ -261,32 +329,44 @@ def write_demos(path, demos: list[Demo], config=None, append: bool = True) -> Pa
         arrays = {"data/.attrs": np.array(json.dumps(file_attrs))}
         for i, d in enumerate(all_demos):
             pre = f"data/demo_{i}/"
-            arrays[pre + "actions"] = np.asarray(d.actions)
+            arrays[pre + "actions"] = _stored("actions", d.actions)
             arrays[pre + ".attrs"] = np.array(json.dumps(d.attrs))
             for k, v in d.obs.items():
-                arrays[pre + "obs/" + k] = np.asarray(v)
+                arrays[pre + "obs/" + k] = _stored(k, v)
             for k, v in d.final.items():
-                arrays[pre + "final/" + k] = np.asarray(v)
+                arrays[pre + "final/" + k] = _stored(k, v)
             for k, v in d.extra.items():
-                arrays[pre + k] = np.asarray(v)
+                arrays[pre + k] = _stored(k, v)
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
     os.replace(tmp, path)
     return path
 
 
+def _stored(key: str, value) -> np.ndarray:
+    """``value`` as format 2 stores it: floating point as float32 (float64 for :data:`FLOAT64_KEYS`)."""
+    v = np.asarray(value)
+    if np.issubdtype(v.dtype, np.floating):
+        return v.astype(np.float64 if key in FLOAT64_KEYS else np.float32, copy=False)
+    return v
+
+
+def _h5_dataset(group, key: str, value) -> None:
+    v = _stored(key, value)
+    group.create_dataset(key, data=v, **(_H5_COMPRESS if v.nbytes >= _H5_MIN_COMPRESS_BYTES and v.ndim else {}))
+
+
 def _h5_write_demo(g, i: int, d: Demo) -> None:
     dg = g.create_group(f"demo_{i}")
-    dg.create_dataset("actions", data=np.asarray(d.actions))
+    _h5_dataset(dg, "actions", d.actions)
     for k, v in d.extra.items():
-        dg.create_dataset(k, data=np.asarray(v))
+        _h5_dataset(dg, k, v)
     og = dg.create_group("obs")
     for k, v in d.obs.items():
-        v = np.asarray(v)
-        og.create_dataset(k, data=v, **({"compression": "gzip", "compression_opts": 4} if v.ndim >= 3 else {}))
+        _h5_dataset(og, k, v)
     fg = dg.create_group("final")
     for k, v in d.final.items():
-        fg.create_dataset(k, data=np.asarray(v))
+        _h5_dataset(fg, k, v)
     dg.attrs.update({k: v for k, v in d.attrs.items()})
 
 
@@ -302,6 +382,8 @@ def append_demos(path, demos: list[Demo]) -> Path:
     if any(json.loads(json.dumps(getattr(d, "env_args", args))) != args for d in demos):
         raise ValueError("demos recorded with different env configs cannot share one file")
     path.parent.mkdir(parents=True, exist_ok=True)
+    if path.exists():
+        open_demo_file(path).close()  # refuses a truncated file or one of another format / version
     with h5py.File(path, "a") as f:
         if "data" not in f:
             g = f.create_group("data")
@@ -310,7 +392,7 @@ def append_demos(path, demos: list[Demo]) -> Path:
         g = f["data"]
         if json.loads(_h5_value(g.attrs["env_args"])) != args:
             raise ValueError(f"{path}: its demos were recorded with another env config")
-        start = len([k for k in g.keys() if k.startswith("demo_")])
+        start = len(_demo_names(g))
         for i, d in enumerate(demos):
             _h5_write_demo(g, start + i, d)
         g.attrs["total"] = int(g.attrs["total"]) + int(sum(d.num_samples for d in demos))
@@ -368,5 +450,6 @@ def replay_demo(demo: Demo, args: dict | str, cabinet_dir: Path | None = None) -
         env.close()
 
 
-__all__ = ["Demo", "DemoRecorder", "append_demos", "FORMAT", "OBS_KEYS", "ReplayResult", "env_args", "load_demo", "read_demos",
+__all__ = ["Demo", "DemoFileError", "DemoRecorder", "FLOAT64_KEYS", "FORMAT", "FORMAT_VERSION", "OBS_KEYS",
+           "append_demos", "check_header", "open_demo_file", "ReplayResult", "env_args", "load_demo", "read_demos",
            "replay_demo", "task_config_from_args", "write_demos"]

@@ -19,8 +19,8 @@ actions are stored as ``actions_executed``, which is what a replay steps.
 The file is the robomimic / LIBERO HDF5 layout of `opend_mj.apps.demos` (see there and the docs
 page ``docs/demonstrations.md`` for the keys). Successful episodes are kept by default; with
 ``keep_failures`` the failed ones too, labelled (``success``, ``failed_stage``). Every episode tried
-is logged to ``<out>.episodes.jsonl`` (its key, success, whether kept), which is what a resumed
-recording skips. Episodes run in ``spawn`` worker processes (an EGL context does not survive fork).
+is logged to ``<out>.episodes.jsonl`` (its key, success, whether kept); a resumed recording skips
+the demos in the file and the failed episodes of the log (:func:`tried_keys`). Episodes run in ``spawn`` worker processes (an EGL context does not survive fork).
 """
 
 from __future__ import annotations
@@ -273,23 +273,49 @@ def _worker_init() -> None:
     worker_init()
 
 
+def tried_keys(out: Path) -> set[tuple]:
+    """The job keys a recording into ``out`` has done: those of the demos in the file, and those its
+    log (``<out>.episodes.jsonl``) says were tried and not kept. A kept episode that the log has but the
+    file lacks (a recording killed while writing) is not done; a torn last log line (killed while
+    logging) is dropped from the log, so that new lines start on a line of their own."""
+    from opend_mj.apps.demos import _demo_names, open_demo_file
+
+    out = Path(out)
+    done: set[tuple] = set()
+    if out.exists():
+        with open_demo_file(out) as f:
+            g = f["data"]
+            for name in _demo_names(g):
+                key = g[name].attrs.get("job_key")
+                if key is not None:
+                    done.add(tuple(json.loads(key)))
+    log = log_path(out)
+    if log.exists():
+        text = log.read_bytes()
+        if text and not text.endswith(b"\n"):
+            text = text[:text.rfind(b"\n") + 1]
+            with open(log, "r+b") as f:
+                f.truncate(len(text))
+        for line in text.decode().splitlines():
+            if not line.strip():
+                continue
+            entry = json.loads(line)
+            if not entry.get("kept"):
+                done.add(tuple(entry["key"]))
+    return done
+
+
 def record_demos(jobs: list[EpisodeJob], out: Path, workers: int = 1, config: RecordConfig = RecordConfig(),
                  progress: bool = True, flush_every: int = 16) -> dict:
-    """Record the jobs not yet tried into ``out`` (HDF5; resumable through ``<out>.episodes.jsonl``).
+    """Record the jobs not yet tried (:func:`tried_keys`) into ``out`` (HDF5; a killed recording
+    resumes without losing or repeating an episode).
 
     Returns counts: total, skipped (tried before), ran, kept, success, errors."""
     from tqdm import tqdm
 
     out = Path(out)
     log = log_path(out)
-    done = set()
-    if log.exists():
-        for line in log.read_text().splitlines():
-            if line.strip():
-                done.add(tuple(json.loads(line)["key"]))
-    if out.exists() and not log.exists():
-        _, old = read_demos(out)
-        done |= {tuple(json.loads(d.attrs["job_key"])) for d in old if "job_key" in d.attrs}
+    done = tried_keys(out)
     todo = [j for j in jobs if tuple(j.key()) not in done]
     counts = {"total": len(jobs), "skipped": len(jobs) - len(todo), "ran": 0, "kept": 0, "success": 0, "errors": 0}
     if not todo:
@@ -299,14 +325,15 @@ def record_demos(jobs: list[EpisodeJob], out: Path, workers: int = 1, config: Re
     bar = tqdm(total=len(todo), desc="demos", unit="ep", disable=not progress)
 
     def flush():
-        demos = [d for _, d in pending if d is not None]
+        batch = list(pending)
+        pending.clear()  # a failed write is not retried by the final flush (no demo twice)
+        demos = [d for _, d in batch if d is not None]
         if demos:
-            append_demos(out, demos)
+            append_demos(out, demos)  # the file first: a kill before the log lines costs no demo
         log.parent.mkdir(parents=True, exist_ok=True)
         with open(log, "a") as f:
-            for line, _ in pending:
+            for line, _ in batch:
                 f.write(json.dumps(line) + "\n")
-        pending.clear()
 
     def take(results):
         for line, demo in results:
@@ -342,16 +369,23 @@ TRAINING_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat",
 
 
 def load_training_demos(paths, max_demos: int | None = None, successes_only: bool = True,
-                        kind: str | None = None) -> list[Demo]:
+                        kind: str | None = None, hand: str | None = None) -> list[Demo]:
     """The demos of one or more files with only the keys training reads (float32 where they are float),
     in file order, at most ``max_demos`` of them (counting the kept ones only); with ``kind``
-    ("drawer" or "door") only those whose instruction names that kind of target."""
-    from opend_mj.apps.demos import _h5_value, _h5py, _is_hdf5
+    ("drawer" or "door") only those whose instruction names that kind of target. With ``hand``, a
+    file holding demos of another hand is refused (:class:`~opend_mj.apps.demos.DemoFileError`, as
+    are truncated files and files of another format version)."""
+    from opend_mj.apps.demos import DemoFileError, _damaged, _demo_names, _h5_value, _is_hdf5, open_demo_file
     from opend_mj.language import target_kind
 
     def wanted(attrs) -> bool:
         return (attrs.get("success") or not successes_only) and (
             kind is None or target_kind(str(attrs.get("instruction", ""))) == kind)
+
+    def check_hand(path, attrs) -> None:
+        if hand is not None and attrs.get("hand") != hand:
+            raise DemoFileError(f"{path}: demonstrations of the {attrs.get('hand')} hand, but training is for "
+                                f"the {hand} hand (--hand)")
 
     out: list[Demo] = []
     for path in [paths] if isinstance(paths, (str, Path)) else paths:
@@ -360,24 +394,28 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
             raise FileNotFoundError(f"{path}: no demonstrations file; record one with `opend demos --out {path}`")
         if not _is_hdf5(path):
             _, demos = read_demos(path)
+            for d in demos:
+                check_hand(path, d.attrs)
             out += [d for d in demos if wanted(d.attrs)]
             continue
-        with _h5py().File(path, "r") as f:
-            if "data" not in f:
-                raise ValueError(f"{path}: not a demonstrations file (no data group)")
+        with open_demo_file(path) as f:
             g = f["data"]
-            for name in sorted((k for k in g if k.startswith("demo_")), key=lambda k: int(k.split("_")[1])):
-                d = g[name]
-                attrs = {k: _h5_value(v) for k, v in d.attrs.items()}
-                if not wanted(attrs):
-                    continue
-                missing = [k for k in TRAINING_KEYS if k not in d["obs"]]
-                if missing:
-                    raise ValueError(f"{path}: {name} has no obs/{missing[0]} (not recorded by `opend demos`)")
-                obs = {k: d["obs"][k][()].astype(np.float32) for k in TRAINING_KEYS}
-                out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs))
-                if max_demos is not None and len(out) >= max_demos:
-                    return out
+            try:
+                for name in _demo_names(g):
+                    d = g[name]
+                    attrs = {k: _h5_value(v) for k, v in d.attrs.items()}
+                    check_hand(path, attrs)
+                    if not wanted(attrs):
+                        continue
+                    missing = [k for k in TRAINING_KEYS if k not in d["obs"]]
+                    if missing:
+                        raise DemoFileError(f"{path}: {name} has no obs/{missing[0]} (not recorded by `opend demos`)")
+                    obs = {k: d["obs"][k][()].astype(np.float32) for k in TRAINING_KEYS}
+                    out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs))
+                    if max_demos is not None and len(out) >= max_demos:
+                        return out
+            except (OSError, KeyError, RuntimeError) as exc:
+                raise _damaged(path, exc) from None
     return out[:max_demos] if max_demos is not None else out
 
 
@@ -392,4 +430,4 @@ def demo_jobs(cabinets_dir, hands, solver: str = "oracle", split: str = "train",
 
 
 __all__ = ["ActionNoise", "DEMO_OBS_KEYS", "NoiseProcess", "RecordConfig", "TRAINING_KEYS", "demo_jobs",
-           "load_training_demos", "log_path", "noise_seed", "record_demos", "record_episode"]
+           "load_training_demos", "log_path", "noise_seed", "record_demos", "record_episode", "tried_keys"]

@@ -52,7 +52,12 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
         raise click.ClickException(f"no episodes: split {split!r} of {cabinets_dir} has no targets")
     noise = ActionNoise(pos=noise_pos, rot=noise_rot, fingers=noise_fingers, tau=noise_tau)
     config = RecordConfig(image_size=image_size, keep_failures=keep_failures, noise=noise)
-    counts = record_demos(jobs, out, workers=workers, config=config, progress=progress)
+    from opend_mj.apps.demos import DemoFileError
+
+    try:
+        counts = record_demos(jobs, out, workers=workers, config=config, progress=progress)
+    except DemoFileError as exc:
+        raise click.ClickException(str(exc)) from None
     click.echo(f"{counts['ran']} episodes recorded, {counts['skipped']} already tried, {counts['success']} "
                f"successes, {counts['kept']} kept, {counts['errors']} errors -> {out} (log {log_path(out)})")
     if counts["ran"] and counts["errors"] == counts["ran"]:
@@ -94,10 +99,7 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     config = dataclasses.replace(BCConfig(seed=seed), **changes)
     out = out or Path("checkpoints") / f"bc_{hand}.pt"
     try:
-        demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind)
-        wrong = {d.attrs.get("hand") for d in demos_list} - {hand}
-        if wrong:
-            raise ValueError(f"the demos are of the {', '.join(sorted(map(str, wrong)))} hand, not {hand}")
+        demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind, hand=hand)
         summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device,
                            kind=kind)
     except (ValueError, FileNotFoundError) as exc:

@@ -92,6 +92,13 @@ def teleop(cabinets, cabinet_id, target, hand, room, seed, study, split, out, re
     from opend_mj.sim.task import make_environment
 
     config = teleop_config()
+    if record is not None and record.exists():
+        from opend_mj.apps.demos import DemoFileError, read_demos
+
+        try:
+            read_demos(record)  # refused before the session, not after it: a damaged or older-format file
+        except DemoFileError as exc:
+            raise click.ClickException(str(exc)) from None
     recorders = []
 
     def make_recorder():
@@ -165,9 +172,12 @@ def replay(file, index, cabinet_dir, tolerance):
     Exits with status 1 if a replay ends more than --tolerance away from the recorded open ratio."""
     import json
 
-    from opend_mj.apps.demos import read_demos, replay_demo
+    from opend_mj.apps.demos import DemoFileError, read_demos, replay_demo
 
-    attrs, demos = read_demos(file)
+    try:
+        attrs, demos = read_demos(file)
+    except (DemoFileError, FileNotFoundError) as exc:
+        raise click.ClickException(str(exc)) from None
     indices = range(len(demos)) if index is None else [index]
     if index is not None and index >= len(demos):
         raise click.UsageError(f"{file} has {len(demos)} demo(s); no demo {index}")
