@@ -92,12 +92,16 @@ def _check_cabinets(ctx, param, value):
                    "(checkpoints/bc_<hand>.pt; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
+@click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
+              help="Run under a perturbation (repeatable; axes camera_pose, camera_fov, light, texture, "
+                   "distractors, physics, depth_noise, instruction; levels mild, strong; drawn per scene "
+                   "from the seed; docs/robustness.md). Goes into every record.")
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.pass_context
 def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, kind, seeds, video_dir,
         light_scale,
-        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait):
+        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, perturb, wait):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -113,6 +117,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
 
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
+    perturb = _check_perturb(perturb, paraphrase, instruction_file)
     policy_spec, parsed_args = None, ()
     if policy is not None:
         from opend_mj.evaluation.agents import (
@@ -137,13 +142,15 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
         jobs = [job for seed in dict.fromkeys(seeds)
                 for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, light_scale=light_scale,
                                      pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
-                                     physics_timestep=physics_timestep, targets=targets or None, kind=kind)]
+                                     physics_timestep=physics_timestep, targets=targets or None, kind=kind,
+                                     perturb=perturb)]
     except ValueError as exc:
         raise click.BadParameter(str(exc), ctx, param_hint="--target") from None
     if policy_spec is not None:
         jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if instruction_file is not None:
         jobs = _with_phrasings(jobs, instruction_file, paraphrase)
+    _check_scenes(jobs)
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
@@ -159,6 +166,37 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     if counts["ran"] and counts["errors"] == counts["ran"]:
         click.echo("error: every episode failed to run (see error_reason in the results file)", err=True)
         raise SystemExit(1)
+
+
+class PerturbRefused(click.ClickException):
+    """A perturbation refused before any episode runs (one line; exit status 2, as bad arguments)."""
+
+    exit_code = 2
+
+
+def _check_perturb(items, paraphrase: int = 0, instruction_file=None) -> str | None:
+    """``--perturb`` values -> the canonical spec (None for none); refuses an unknown axis or level."""
+    from opend_mj.sim.perturb import PerturbError, parse_perturb, perturb_items
+
+    try:
+        spec = parse_perturb(list(items))
+    except PerturbError as exc:
+        raise PerturbRefused(str(exc)) from None
+    if "instruction" in perturb_items(spec) and (paraphrase or instruction_file is not None):
+        raise PerturbRefused("--perturb instruction=... rewords the instruction itself; "
+                             "it excludes --paraphrase and --instruction-file")
+    return spec
+
+
+def _check_scenes(jobs) -> None:
+    """Refuse a run whose perturbation makes a scene invalid, before any episode runs."""
+    from opend_mj.evaluation.jobs import check_perturbed_scenes
+    from opend_mj.sim.perturb import PerturbError
+
+    try:
+        check_perturbed_scenes(jobs)
+    except PerturbError as exc:
+        raise PerturbRefused(str(exc)) from None
 
 
 def _with_phrasings(jobs, instruction_file: Path, paraphrase: int):
