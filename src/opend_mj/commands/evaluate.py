@@ -341,3 +341,76 @@ def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase
             records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
                                        paraphrase=paraphrase, limit=limit, progress=progress, out=part)
     click.echo(format_summary(summarise(records)))
+
+
+@click.command("robustness")
+@click.option("--solver", "solvers", multiple=True, callback=_check_solver,
+              help="A handle solver for the planner (repeatable).")
+@click.option("--policy", "policies", multiple=True, metavar="bc|module:Class|file.py[:Class]",
+              help="An agent instead of the planner (repeatable; as `opend run --policy`).")
+@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True, callback=_check_hands)
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--axis", "axes", multiple=True, metavar="AXIS",
+              help="Only these perturbation axes (repeatable) [every axis, at both levels].")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--records", "records_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("build/robustness"), show_default=True,
+              help="Per-episode records, one resumable file per solver or agent: <dir>/<name>_<split>.jsonl.")
+@click.option("--out", "out_prefix", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("build/robustness/robustness"), show_default=True,
+              help="The table: <out>.md, <out>.json (counts only) and the plot <out>.png.")
+@click.option("--table-only", is_flag=True, default=False,
+              help="Run nothing: tabulate the records already under --records.")
+def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit, workers, records_dir, out_prefix,
+               table_only):
+    """Nominal and every perturbation axis at both levels, for each solver or agent: a table of success
+    with 95 % intervals against nominal, and a plot (docs/robustness.md)."""
+    from opend_mj.evaluation.pool import run_jobs
+    from opend_mj.evaluation.robustness import records_path, robustness_jobs, write_outputs
+    from opend_mj.evaluation.scoring import load_records
+    from opend_mj.sim.perturb import AXES, PerturbError
+
+    unknown = [a for a in axes if a not in AXES]
+    if unknown:
+        raise PerturbRefused(f"--axis {unknown[0]!r}: unknown perturbation axis; known: {', '.join(AXES)}")
+    axes = tuple(axes) or AXES
+    if not solvers and not policies:
+        raise click.UsageError("give at least one --solver or --policy")
+    entries = [(s, None, ()) for s in solvers]
+    for policy in policies:
+        from opend_mj.evaluation.agents import agent_name, load_agent, resolve_policy
+
+        try:
+            target, attr = resolve_policy(policy)
+            spec = f"{target}:{attr}"
+            entries.append((agent_name(load_agent(spec, ())), spec, ()))
+        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
+            raise click.BadParameter(f"{policy}: {exc}", param_hint="--policy") from None
+    paths = []
+    plans = []
+    for name, policy, args in entries:
+        path = records_path(records_dir, name, split)
+        paths.append(path)
+        if table_only:
+            continue
+        try:  # every scene of every entry checked before any episode runs
+            plans.append((path, robustness_jobs(cabinets_dir, hands, name, split=split, seed=seed, limit=limit,
+                                                axes=axes, policy=policy, policy_args=args)))
+        except PerturbError as exc:
+            raise PerturbRefused(str(exc)) from None
+    for path, jobs in plans:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        counts = run_jobs(jobs, path, workers=workers)
+        click.echo(f"{path}: {counts['ran']} episodes run, {counts['skipped']} already done, "
+                   f"{counts['errors']} errors", err=True)
+    records = load_records([p for p in paths if p.is_file()])
+    if not records:
+        raise click.ClickException(f"no records under {records_dir} for {', '.join(n for n, _, _ in entries)}")
+    write_outputs(records, out_prefix, title=f"Robustness ({split} split of {cabinets_dir})",
+                  label=f"{cabinets_dir} split={split} seed={seed}")
+    click.echo(out_prefix.with_suffix(".md").read_text())
+    click.echo(f"wrote {out_prefix.with_suffix('.md')}, .json, .png", err=True)

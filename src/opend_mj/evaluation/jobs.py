@@ -72,7 +72,7 @@ def check_perturbed_scenes(jobs: list[EpisodeJob]) -> int:
     before any episode. Returns how many perturbed scenes were checked."""
     from opend_mj.evaluation.episode import scene_seed
     from opend_mj.sim.cabinet import load_cabinet_info
-    from opend_mj.sim.perturb import SceneShift
+    from opend_mj.sim import perturb
     from opend_mj.sim.task import TaskConfig, scene_geometry
 
     seen = set()
@@ -82,8 +82,8 @@ def check_perturbed_scenes(jobs: list[EpisodeJob]) -> int:
         seen.add(scene_key(job))
         info = load_cabinet_info(Path(job.cabinet_dir))
         bounds = (info["bounds"]["min"], info["bounds"]["max"])
-        config = TaskConfig(perturb=job.perturb)
-        shift = SceneShift.draw(job.perturb, scene_seed(job), bounds, config.perturb_config)
+        config = TaskConfig(perturb=job.perturb, perturb_config=perturb.DEFAULT_CONFIG)
+        shift = perturb.SceneShift.draw(job.perturb, scene_seed(job), bounds, config.perturb_config)
         pose, start = scene_geometry(bounds, config, shift)
         shift.check(bounds, pose.pos, start, label=f"{job.cabinet_dir}")
     return len(seen)

@@ -93,6 +93,10 @@ class PerturbConfig:
         return getattr(self, name)
 
 
+#: The levels every run uses (`TaskConfig.perturb_config`'s default; the pre-run scene check reads it).
+DEFAULT_CONFIG = PerturbConfig()
+
+
 def parse_perturb(items) -> str | None:
     """``AXIS=LEVEL`` strings (or one comma-joined string) -> the canonical spec (axes in `AXES`
     order, comma-joined), or None for none. Raises `PerturbError` naming an unknown axis or level."""

@@ -28,7 +28,7 @@ from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
 from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
-from opend_mj.sim.perturb import PerturbConfig, SceneShift  # noqa: E402
+from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 
@@ -58,7 +58,7 @@ class TaskConfig:
     compiled_step: bool = True
     #: A perturbation (`sim.perturb`: ``AXIS=LEVEL[,AXIS=LEVEL]``), drawn from the episode's seed; None: nominal
     perturb: str | None = None
-    perturb_config: PerturbConfig = PerturbConfig()
+    perturb_config: PerturbConfig = DEFAULT_CONFIG
 
     def __post_init__(self):
         if not (self.control_hz > 0 and self.physics_timestep > 0):
