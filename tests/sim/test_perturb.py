@@ -209,6 +209,13 @@ def test_run_and_robustness_table(small_dataset, tmp_path):
     assert cell["episodes"] == 1 and "delta" in cell and len(cell["ci95"]) == 2
     assert "| oracle | franka |" in (tmp_path / "rob.md").read_text()
     assert (tmp_path / "rob.png").stat().st_size > 1000
+    from opend_mj.evaluation.report import results_markdown
+
+    (tmp_path / "results" / "robustness").mkdir(parents=True)
+    (tmp_path / "results" / "robustness" / "generated.json").write_text((tmp_path / "rob.json").read_text())
+    page = results_markdown(tmp_path / "results")
+    assert "## Robustness, generated cabinets" in page and "| oracle | franka |" in page
+    assert "opend robustness --solver oracle" in page
     res = CliRunner().invoke(main, ["robustness", "--solver", "oracle", "--axis", "fog", "--cabinets",
                                     str(small_dataset)])
     assert res.exit_code == 2 and "fog" in res.output

@@ -236,7 +236,25 @@ def results_markdown(results_dir: Path) -> str:
                 "`make results` regenerates every file. Cells: > 20 % / >= 75 % of range.", "",
                 "| condition | " + " | ".join(HAND_TITLES[h] for h in HANDS) + " |", "|---" * 5 + "|"]
         out += rows + [""]
+    out += robustness_sections(results_dir)
     return "\n".join(out)
+
+
+def robustness_sections(results_dir: Path) -> list[str]:
+    """The robustness tables (`opend robustness`): generated (results/robustness/*.json) and real
+    (results/real/robustness_*.json, counts only), each with the label of the run that made it."""
+    from opend_mj.evaluation.robustness import load_table, table_markdown
+
+    results_dir = Path(results_dir)
+    out = []
+    for title, paths in (("generated cabinets", sorted((results_dir / "robustness").glob("*.json"))),
+                         ("real cabinets", sorted((results_dir / "real").glob("robustness_*.json")))):
+        for path in paths:
+            table = load_table(path)
+            out += [table_markdown(table, f"Robustness, {title} (`{path.relative_to(results_dir.parent)}`)"),
+                    f"Made by: `{table.get('command') or 'opend robustness'}` ({table.get('label', '')}); "
+                    "docs/robustness.md.", ""]
+    return out
 
 
 def update_readme(readme: Path, table: str) -> bool:

@@ -177,12 +177,14 @@ def plot_table(table: dict, path: Path) -> Path:
 
 
 def write_outputs(records: list[dict], out_prefix: Path, title: str = "Robustness", split: str | None = None,
-                  bands: Bands = Bands(), label: str = "") -> dict:
-    """``<prefix>.md``, ``<prefix>.json`` (counts only) and ``<prefix>.png``; returns the table."""
+                  bands: Bands = Bands(), label: str = "", command: str = "") -> dict:
+    """``<prefix>.md``, ``<prefix>.json`` (counts only) and ``<prefix>.png``; returns the table.
+    ``label`` and ``command`` say what was run (the results page quotes them)."""
     out_prefix = Path(out_prefix)
     out_prefix.parent.mkdir(parents=True, exist_ok=True)
     table = robustness_table(records, bands, split)
     table["label"] = label
+    table["command"] = command
     out_prefix.with_suffix(".json").write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
     out_prefix.with_suffix(".md").write_text(table_markdown(table, title))
     plot_table(table, out_prefix.with_suffix(".png"))
