@@ -410,12 +410,13 @@ def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit,
     records = load_records([p for p in paths if p.is_file()])
     if not records:
         raise click.ClickException(f"no records under {records_dir} for {', '.join(n for n, _, _ in entries)}")
-    import sys
-
+    words = ([f"--solver {x}" for x in solvers] + [f"--policy {x}" for x in policies]
+             + [f"--hand {h}" for h in hands] + [f"--split {split}", f"--cabinets {cabinets_dir}"]
+             + [f"--axis {a}" for a in axes if len(axes) < len(AXES)] + ([f"--limit {limit}"] if limit else [])
+             + ([f"--seed {seed}"] if seed else []))
     write_outputs(records, out_prefix, title=f"Robustness ({split} split of {cabinets_dir})",
                   label=f"{Path(cabinets_dir).name}, split {split}, seed {seed}"
                         + (f", first {limit} targets" if limit else ""),
-                  command="opend robustness " + " ".join(sys.argv[2:] if len(sys.argv) > 1
-                                                         and sys.argv[1] == "robustness" else sys.argv[1:]))
+                  command="opend robustness " + " ".join(words))
     click.echo(out_prefix.with_suffix(".md").read_text())
     click.echo(f"wrote {out_prefix.with_suffix('.md')}, .json, .png", err=True)
