@@ -65,62 +65,70 @@ def _ok(r: dict) -> bool:
 
 
 def robustness_table(records: list[dict], bands: Bands = Bands(), split: str | None = None) -> dict:
-    """Per (solver, hand): nominal and every condition's successes, episodes, rate, 95 % interval and
-    difference from nominal (points), and whether it stays within the band. ``split``: only its
+    """Per (solver, hand): nominal and every condition's successes, episodes, rate and 95 % interval,
+    and its difference (points) from nominal on the same episodes (cabinet, target, seed: a run cut
+    short compares like with like), and whether that stays within the band. ``split``: only its
     records (None: all). Counts only: no cabinet ids."""
     from opend_mj.evaluation.scoring import wilson
 
-    cells: dict = defaultdict(lambda: defaultdict(lambda: [0, 0]))
+    episodes: dict = defaultdict(lambda: defaultdict(dict))
     for r in records:
         if split is not None and r.get("split") != split:
             continue
-        c = cells[(r["solver"], r["hand"])][r.get("perturb") or "nominal"]
-        c[0] += int(_ok(r))
-        c[1] += 1
+        key = (r["cabinet"], r["joint"], int(r.get("seed", 0)))
+        episodes[(r["solver"], r["hand"])][r.get("perturb") or "nominal"][key] = _ok(r)
     rows = []
-    for (solver, hand), conds in sorted(cells.items()):
+    for (solver, hand), conds in sorted(episodes.items()):
         row = {"solver": solver, "hand": hand, "conditions": {}}
-        nominal = conds.get("nominal")
-        base = 100.0 * nominal[0] / nominal[1] if nominal and nominal[1] else None
+        nominal = conds.get("nominal", {})
         for name in ["nominal"] + [c for c in conditions() if c]:
             if name not in conds:
                 continue
-            k, n = conds[name]
+            oks = conds[name]
+            k, n = sum(oks.values()), len(oks)
             lo, hi = wilson(k, n)
-            rate = 100.0 * k / n
-            cell = {"successes": k, "episodes": n, "rate": round(rate, 2),
+            cell = {"successes": k, "episodes": n, "rate": round(100.0 * k / n, 2),
                     "ci95": [round(100 * lo, 2), round(100 * hi, 2)]}
-            if name != "nominal" and base is not None:
+            paired = [key for key in oks if key in nominal]
+            if name != "nominal" and paired:
                 level = name.split("=")[1]
-                cell["delta"] = round(rate - base, 2)
-                cell["within_band"] = rate >= base - bands.limit(level)
+                base = 100.0 * sum(nominal[key] for key in paired) / len(paired)
+                rate = 100.0 * sum(oks[key] for key in paired) / len(paired)
+                cell.update(paired_episodes=len(paired), nominal_rate=round(base, 2), delta=round(rate - base, 2),
+                            within_band=bool(rate >= base - bands.limit(level)))
             row["conditions"][name] = cell
         rows.append(row)
     return {"bands": {"mild": bands.mild, "strong": bands.strong}, "criterion": "open ratio > 20 %", "rows": rows}
 
 
+def _cell_text(c: dict | None) -> str:
+    if c is None:
+        return "-"
+    text = f"{c['rate']:.1f} [{c['ci95'][0]:.1f}-{c['ci95'][1]:.1f}] ({c['successes']}/{c['episodes']})"
+    if "delta" in c:
+        text += f" {c['delta']:+.1f}{'' if c['within_band'] else ' !'}"
+    return text
+
+
 def table_markdown(table: dict, title: str = "Robustness") -> str:
-    """One row per (solver, hand); a column per axis with its mild and strong cells; a cell is
-    ``rate [95 % interval] (difference from nominal)``, with ``!`` where it falls outside its band."""
+    """One row per (solver, hand, axis): the nominal rate and the mild and strong cells, each
+    ``rate [95 % interval] (successes/episodes) points-against-nominal``, ``!`` outside its band."""
     b = table["bands"]
     lines = [f"## {title}", "",
-             f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (points against nominal); "
-             f"`!` marks a drop beyond the band ({b['mild']:g} points mild, {b['strong']:g} strong).", ""]
-    head = ["solver / agent", "hand", "nominal"] + [f"{a} {lv}" for a in AXES for lv in LEVELS]
-    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+             f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (successes/episodes), then the "
+             f"difference in points from nominal on the same episodes; `!` marks a drop beyond the band "
+             f"({b['mild']:g} points mild, {b['strong']:g} strong).", "",
+             "| solver / agent | hand | axis | nominal | mild | strong |", "|---|---|---|---|---|---|"]
     for row in table["rows"]:
-        cells = [row["solver"], row["hand"]]
-        for name in ["nominal"] + [f"{a}={lv}" for a in AXES for lv in LEVELS]:
-            c = row["conditions"].get(name)
-            if c is None:
-                cells.append("-")
+        nominal = _cell_text(row["conditions"].get("nominal"))
+        if set(row["conditions"]) <= {"nominal"}:
+            lines.append(f"| {row['solver']} | {row['hand']} | - | {nominal} | - | - |")
+        for axis in AXES:
+            cells = [row["conditions"].get(f"{axis}={lv}") for lv in LEVELS]
+            if all(c is None for c in cells):
                 continue
-            text = f"{c['rate']:.1f} [{c['ci95'][0]:.1f}-{c['ci95'][1]:.1f}]"
-            if "delta" in c:
-                text += f" ({c['delta']:+.1f}){'' if c['within_band'] else ' !'}"
-            text += f" n={c['episodes']}" if name == "nominal" else ""
-            cells.append(text)
-        lines.append("| " + " | ".join(cells) + " |")
+            lines.append(f"| {row['solver']} | {row['hand']} | `{axis}` | {nominal} | "
+                         + " | ".join(_cell_text(c) for c in cells) + " |")
     outside = [(row["solver"], row["hand"], name, c["delta"]) for row in table["rows"]
                for name, c in row["conditions"].items() if c.get("within_band") is False]
     lines.append("")
