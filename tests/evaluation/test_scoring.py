@@ -177,3 +177,28 @@ def test_score_gives_intervals_and_ranking_overlaps():
     md = report_markdown(records)
     assert "| 1 | a | allegro | 96.4 (81/84) [90.0-98.8] |" in md
     assert "overlaps #2" in md and "clear of all others" in md
+
+
+def test_robustness_table_pairs_episodes_and_marks_bands():
+    """A condition is compared with nominal on the same episodes; drops beyond 5 points (mild) or 15
+    (strong) are marked, smaller ones are not."""
+    from opend_mj.evaluation.robustness import robustness_table, table_markdown
+
+    def runs(perturb, oks):
+        return [{"cabinet": f"c{i}", "joint": "j", "hand": "allegro", "solver": "s", "split": "test",
+                 "open_ratio": 0.5 if ok else 0.0, **({"perturb": perturb} if perturb else {})}
+                for i, ok in enumerate(oks)]
+
+    nominal = [True] * 15 + [False] * 5                        # 75 % over 20
+    records = (runs(None, nominal) + runs("light=mild", [True] * 14 + [False] * 6)      # -5: inside
+               + runs("light=strong", [True] * 11 + [False] * 9)                        # -20: outside
+               + runs("physics=mild", [True] * 5 + [False] * 5))  # first 10 only: nominal 100 % there
+    row = robustness_table(records)["rows"][0]["conditions"]
+    assert row["nominal"]["rate"] == 75.0 and row["nominal"]["ci95"] == [53.13, 88.81]
+    assert row["light=mild"]["delta"] == -5.0 and row["light=mild"]["within_band"]
+    assert row["light=strong"]["delta"] == -20.0 and not row["light=strong"]["within_band"]
+    assert row["physics=mild"]["paired_episodes"] == 10 and row["physics=mild"]["delta"] == -50.0
+    md = table_markdown(robustness_table(records))
+    assert "| s | allegro | `light` | 75.0 [53.1-88.8] (15/20) | 70.0 [48.1-85.5] (14/20) -5.0 | " \
+           "55.0 [34.2-74.2] (11/20) -20.0 ! |" in md
+    assert "Outside the bands: s / allegro under light=strong (-20.0); s / allegro under physics=mild (-50.0)." in md
