@@ -407,7 +407,13 @@ def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit,
         counts = run_jobs(jobs, path, workers=workers)
         click.echo(f"{path}: {counts['ran']} episodes run, {counts['skipped']} already done, "
                    f"{counts['errors']} errors", err=True)
-    records = load_records([p for p in paths if p.is_file()])
+    from opend_mj.evaluation.jobs import make_jobs
+
+    # the table holds exactly this command's episodes (a records file may hold more: another --limit)
+    wanted = {(j.cabinet, j.joint, j.hand) for j in make_jobs(cabinets_dir, hands, "-", split=split, seed=seed,
+                                                              limit=limit)}
+    records = [r for r in load_records([p for p in paths if p.is_file()])
+               if (r["cabinet"], r["joint"], r["hand"]) in wanted and int(r.get("seed", 0)) == seed]
     if not records:
         raise click.ClickException(f"no records under {records_dir} for {', '.join(n for n, _, _ in entries)}")
     words = ([f"--solver {x}" for x in solvers] + [f"--policy {x}" for x in policies]
