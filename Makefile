@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -70,6 +70,23 @@ eval-real: install
 	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl --csv $(REAL_OUT)/$(SOLVER)_scores$(TAG).csv \
 		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json \
 		--manifest $(REAL_CABINETS)/manifest.json
+
+## Robustness (docs/robustness.md): nominal and every perturbation axis at both levels, for the solvers in
+## ROBUST_SOLVERS with the hands in ROBUST_HANDS. `robustness`: the generated test split (records and table
+## under results/robustness/); `robustness-real`: your compiled PartNet-Mobility folder as for eval-real
+## (records under build/, only the table's counts in results/real/robustness_<split><tag>.json).
+ROBUST_SOLVERS ?= --solver oracle --solver fasterrcnn
+ROBUST_HANDS ?= --hand allegro --hand franka
+robustness: install
+	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split test --workers $(WORKERS) $(RUN_ARGS) \
+		--records results/robustness --out results/robustness/generated
+robustness-real: install
+	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
+	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split $(SPLIT) --cabinets $(REAL_CABINETS) \
+		--workers $(WORKERS) $(RUN_ARGS) --records $(REAL_OUT)/robustness --out $(REAL_OUT)/robustness/real$(TAG)
+	mkdir -p results/real
+	cp $(REAL_OUT)/robustness/real$(TAG).json results/real/robustness_$(SPLIT)$(TAG).json
+	cp $(REAL_OUT)/robustness/real$(TAG).png results/real/robustness_$(SPLIT)$(TAG).png
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

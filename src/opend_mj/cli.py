@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "render-hand": "opend_mj.commands.hands:render_hand",
     "run": "opend_mj.commands.evaluate:run",
     "score": "opend_mj.commands.evaluate:score",
+    "robustness": "opend_mj.commands.evaluate:robustness",
     "report": "opend_mj.commands.evaluate:report",
     "reword": "opend_mj.commands.evaluate:reword",
     "evaluate-solver": "opend_mj.commands.evaluate:evaluate_solver",

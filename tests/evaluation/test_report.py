@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -64,12 +65,13 @@ def test_report_and_readme_table(tmp_path):
     table = main_table(results)
     allegro = next(line for line in table.splitlines() if line.startswith("| Allegro"))
     cells = [c.strip() for c in allegro.strip("|").split("|")]
-    assert cells[1] == "50.0 / 25.0"      # generated: 2 of 4 > 20 %, 1 of 4 at 75 % of range
-    assert cells[2] == "100.0 / 50.0"     # real aggregates
+    # generated: 2 of 4 > 20 %, 1 of 4 at 75 % of range, each with its 95 % Wilson interval
+    assert cells[1] == "50.0 [15.0-85.0] / 25.0 [4.6-69.9]"
+    assert cells[2] == "100.0 [34.2-100.0] / 50.0 [9.5-90.5]"     # real aggregates: 2 of 2, 1 of 2
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{README_BEGIN}\nold table\n{README_END}\nrest\n")
     out = write_report(results, tmp_path / "docs" / "results.md", readme)
-    assert "50.0 / 25.0" in readme.read_text() and "old table" not in readme.read_text()
+    assert "50.0 [15.0-85.0] / 25.0 [4.6-69.9]" in readme.read_text() and "old table" not in readme.read_text()
     assert readme.read_text().endswith("rest\n")
     assert "# Results" in out.read_text()
     plain = tmp_path / "PLAIN.md"
@@ -93,6 +95,11 @@ def test_excluded_targets_count_as_failures(tmp_path):
         write_summary(RECORDS, tmp_path / "s.json", manifest=manifest)
 
 
+def _plain(text: str) -> str:
+    """A cell without its 95 % intervals (the tests of counts read the rates alone)."""
+    return re.sub(r" \[[0-9.]+-[0-9.]+\]", "", text)
+
+
 def test_report_reads_every_hands_bc_records(tmp_path):
     """The behaviour-cloning columns read one records file per hand (results/bc/<hand>_shipped_test.jsonl)
     and the real aggregates results/real/bc_all.json."""
@@ -107,8 +114,8 @@ def test_report_reads_every_hands_bc_records(tmp_path):
     write_summary(bc[1:3], results / "real" / "bc_all.json")
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")]
             for line in main_table(results).splitlines()[2:]}
-    assert rows["Allegro"][7:9] == ["50.0 / 25.0", "50.0 / 0.0"]
-    assert rows["Shadow"][7:9] == ["100.0 / 50.0", "- / -"]
+    assert [_plain(c) for c in rows["Allegro"][7:9]] == ["50.0 / 25.0", "50.0 / 0.0"]
+    assert [_plain(c) for c in rows["Shadow"][7:9]] == ["100.0 / 50.0", "- / -"]
     assert rows["Franka gripper"][7] == "- / -"
     page = write_report(results, tmp_path / "results.md").read_text()
     assert "## Behaviour cloning" in page and "results/bc/HAND_shipped_test.jsonl" in page

@@ -13,7 +13,7 @@ DATA = Path(__file__).parent / "data" / "results_small.jsonl"
 def test_score_tables_exact():
     from opend_mj.evaluation.scoring import load_records, report_markdown
 
-    md = report_markdown(load_records([DATA]))
+    md = _plain_md(load_records([DATA]))
     assert "# Results (9 episodes)" in md
     # 20 %: allegro train 0/1 drawers, 1/1 doors; test 2/2 drawers, 1/2 doors
     assert ("| allegro | oracle | 0.0 (0/1) | 100.0 (1/1) | 50.0 (1/2) | 100.0 (2/2) | 50.0 (1/2) | 75.0 (3/4) |"
@@ -42,7 +42,7 @@ def test_refused_instructions_are_a_stage_of_their_own():
                {**base, "joint": "b", "instruction": "open the one on the left", "target_type": "door",
                 "failed_stage": "language"},
                {**base, "joint": "c", "instruction": "top drawer", "failed_stage": "grasp"}]
-    md = report_markdown(records)
+    md = _plain_md(records)
     assert STAGE_ORDER[0] == "language"
     assert "| allegro | oracle | test | 3 | 2 | 0 | 0 | 1 | 0 | 0 | 0 |" in md
     assert "| allegro | oracle | - | - | - | 0.0 (0/2) | 0.0 (0/1) | 0.0 (0/3) |" in md
@@ -96,9 +96,9 @@ def test_handles_given_up_by_their_kind_are_counted():
                dict(base, joint="joint_1", wrong_kind=[{"box": [0, 0, 1, 1], "kind": "door"}], success=False,
                     open_ratio=0.0),
                dict(base, joint="joint_2", wrong_kind=[])]
-    md = report_markdown(records)
+    md = _plain_md(records)
     assert "| shadow | cliport | test | 3 | 2 | 1 |" in md
-    assert "given up" not in report_markdown([records[2]])
+    assert "given up" not in _plain_md([records[2]])
 
 
 def _rec(joint, **kw):
@@ -122,7 +122,7 @@ def test_range_column_from_range_ratio_or_raw_joint_value():
     assert success_table(recs)[0]["test_overall"][1:] == (3, 4)
     top = ranking(recs)[0]
     assert top["test_overall_range"] == (0.5, 2, 4)
-    md = report_markdown(recs)
+    md = _plain_md(recs)
     assert "joint at >= 75 % of its range (ManiSkill3)" in md
     assert "| 1 | s | h | 75.0 (3/4) | 50.0 (2/4) |" in md
 
@@ -133,4 +133,72 @@ def test_range_column_is_na_for_records_without_the_range():
 
     old = [_rec("a", open_ratio=0.45, success=True), _rec("b", open_ratio=0.1, success=False)]
     assert range_fraction(old[0]) is None
-    assert "| 1 | s | h | 50.0 (1/2) | n/a |" in report_markdown(old)
+    assert "| 1 | s | h | 50.0 (1/2) | n/a |" in _plain_md(old)
+
+
+def _plain_md(records) -> str:
+    """`report_markdown` without its 95 % intervals (these tests check the counts and rates)."""
+    import re
+
+    from opend_mj.evaluation.scoring import report_markdown
+
+    return re.sub(r" \[[0-9.]+-[0-9.]+\]", "", report_markdown(records))
+
+
+def test_wilson_interval_reference_values():
+    """95 % Wilson intervals against textbook values (Brown, Cai & DasGupta 2001): inside [0, 1], not
+    empty at 0 or n successes, narrower with more episodes."""
+    from opend_mj.evaluation.scoring import interval_text, wilson
+
+    lo, hi = wilson(0, 10)
+    assert lo == 0.0 and abs(hi - 0.2775) < 1e-4
+    lo, hi = wilson(5, 10)
+    assert abs(lo - 0.2366) < 1e-4 and abs(hi - 0.7634) < 1e-4
+    assert abs(wilson(84, 84)[1] - 1.0) < 1e-12 and wilson(84, 84)[0] < 0.96
+    assert wilson(0, 0) == (0.0, 1.0)
+    assert wilson(42, 84)[1] - wilson(42, 84)[0] < wilson(5, 10)[1] - wilson(5, 10)[0]
+    assert interval_text(81, 84) == "[90.0-98.8]"
+
+
+def test_score_gives_intervals_and_ranking_overlaps():
+    """Every rate of `opend score` carries its interval; the ranking says which entries' intervals
+    overlap (81/84 and 80/84 do; 81/84 and 30/84 do not), and perturbed runs are their own entries."""
+    from opend_mj.evaluation.scoring import ranking, report_markdown
+
+    def runs(solver, k, n, **extra):
+        return [{"cabinet": f"c{i}", "joint": "j", "hand": "allegro", "solver": solver, "split": "test",
+                 "target_type": "drawer", "open_ratio": 0.5 if i < k else 0.0, **extra} for i in range(n)]
+
+    records = runs("a", 81, 84) + runs("b", 80, 84) + runs("a", 30, 84, perturb="light=strong")
+    rows = {r["solver"]: r for r in ranking(records)}
+    assert set(rows) == {"a", "b", "a [light=strong]"}
+    assert rows["a"]["overlaps"] == [rows["b"]["rank"]]
+    assert rows["a [light=strong]"]["overlaps"] == []
+    md = report_markdown(records)
+    assert "| 1 | a | allegro | 96.4 (81/84) [90.0-98.8] |" in md
+    assert "overlaps #2" in md and "clear of all others" in md
+
+
+def test_robustness_table_pairs_episodes_and_marks_bands():
+    """A condition is compared with nominal on the same episodes; drops beyond 5 points (mild) or 15
+    (strong) are marked, smaller ones are not."""
+    from opend_mj.evaluation.robustness import robustness_table, table_markdown
+
+    def runs(perturb, oks):
+        return [{"cabinet": f"c{i}", "joint": "j", "hand": "allegro", "solver": "s", "split": "test",
+                 "open_ratio": 0.5 if ok else 0.0, **({"perturb": perturb} if perturb else {})}
+                for i, ok in enumerate(oks)]
+
+    nominal = [True] * 15 + [False] * 5                        # 75 % over 20
+    records = (runs(None, nominal) + runs("light=mild", [True] * 14 + [False] * 6)      # -5: inside
+               + runs("light=strong", [True] * 11 + [False] * 9)                        # -20: outside
+               + runs("physics=mild", [True] * 5 + [False] * 5))  # first 10 only: nominal 100 % there
+    row = robustness_table(records)["rows"][0]["conditions"]
+    assert row["nominal"]["rate"] == 75.0 and row["nominal"]["ci95"] == [53.13, 88.81]
+    assert row["light=mild"]["delta"] == -5.0 and row["light=mild"]["within_band"]
+    assert row["light=strong"]["delta"] == -20.0 and not row["light=strong"]["within_band"]
+    assert row["physics=mild"]["paired_episodes"] == 10 and row["physics=mild"]["delta"] == -50.0
+    md = table_markdown(robustness_table(records))
+    assert "| s | allegro | `light` | 75.0 [53.1-88.8] (15/20) | 70.0 [48.1-85.5] (14/20) -5.0 | " \
+           "55.0 [34.2-74.2] (11/20) -20.0 ! |" in md
+    assert "Outside the bands: s / allegro under light=strong (-20.0); s / allegro under physics=mild (-50.0)." in md

@@ -92,6 +92,10 @@ def _check_cabinets(ctx, param, value):
                    "(checkpoints/bc_<hand>.pt; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
+@click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
+              help="Run under a perturbation (repeatable; axes camera_pose, camera_fov, light, texture, "
+                   "distractors, physics, depth_noise, instruction; levels mild, strong; drawn per scene "
+                   "from the seed; docs/robustness.md). Goes into every record.")
 @click.option("--wait", is_flag=True, default=False,
               help="If another run is writing --out, wait for it to finish (default: exit with status 2).")
 @click.option("--episode-timeout", "episode_timeout", type=click.FloatRange(min=0), default=None, metavar="S",
@@ -100,7 +104,7 @@ def _check_cabinets(ctx, param, value):
 @click.pass_context
 def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, kind, seeds, video_dir,
         light_scale,
-        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, wait, episode_timeout):
+        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, perturb, wait, episode_timeout):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -117,6 +121,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
 
     if address is not None and backend != "ray":
         raise click.UsageError("--address needs --backend ray")
+    perturb = _check_perturb(perturb, paraphrase, instruction_file)
     policy_spec, parsed_args = None, ()
     actor = solver  # what acts, as the results' solver column names it: a handle solver or an agent
     if policy is not None:
@@ -142,13 +147,15 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
         jobs = [job for seed in dict.fromkeys(seeds)
                 for job in make_jobs(cabinets_dir, hands, actor, split=split, seed=seed, light_scale=light_scale,
                                      pull=pull, limit=limit, video_dir=video_dir, paraphrase=paraphrase,
-                                     physics_timestep=physics_timestep, targets=targets or None, kind=kind)]
+                                     physics_timestep=physics_timestep, targets=targets or None, kind=kind,
+                                     perturb=perturb)]
     except ValueError as exc:
         raise click.BadParameter(str(exc), ctx, param_hint="--target") from None
     if policy_spec is not None:
         jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
     if instruction_file is not None:
         jobs = _with_phrasings(jobs, instruction_file, paraphrase)
+    _check_scenes(jobs)
     if not jobs:
         click.echo(f"no episodes: split {split!r} of {cabinets_dir} has no targets", err=True)
     try:
@@ -165,6 +172,37 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     if counts["ran"] and counts["errors"] == counts["ran"]:
         click.echo("error: every episode failed to run (see error_reason in the results file)", err=True)
         raise SystemExit(1)
+
+
+class PerturbRefused(click.ClickException):
+    """A perturbation refused before any episode runs (one line; exit status 2, as bad arguments)."""
+
+    exit_code = 2
+
+
+def _check_perturb(items, paraphrase: int = 0, instruction_file=None) -> str | None:
+    """``--perturb`` values -> the canonical spec (None for none); refuses an unknown axis or level."""
+    from opend_mj.sim.perturb import PerturbError, parse_perturb, perturb_items
+
+    try:
+        spec = parse_perturb(list(items))
+    except PerturbError as exc:
+        raise PerturbRefused(str(exc)) from None
+    if "instruction" in perturb_items(spec) and (paraphrase or instruction_file is not None):
+        raise PerturbRefused("--perturb instruction=... rewords the instruction itself; "
+                             "it excludes --paraphrase and --instruction-file")
+    return spec
+
+
+def _check_scenes(jobs) -> None:
+    """Refuse a run whose perturbation makes a scene invalid, before any episode runs."""
+    from opend_mj.evaluation.jobs import check_perturbed_scenes
+    from opend_mj.sim.perturb import PerturbError
+
+    try:
+        check_perturbed_scenes(jobs)
+    except PerturbError as exc:
+        raise PerturbRefused(str(exc)) from None
 
 
 def _with_phrasings(jobs, instruction_file: Path, paraphrase: int):
@@ -319,3 +357,88 @@ def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase
             records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
                                        paraphrase=paraphrase, limit=limit, progress=progress, out=part)
     click.echo(format_summary(summarise(records)))
+
+
+@click.command("robustness")
+@click.option("--solver", "solvers", multiple=True, callback=_check_solver,
+              help="A handle solver for the planner (repeatable).")
+@click.option("--policy", "policies", multiple=True, metavar="bc|module:Class|file.py[:Class]",
+              help="An agent instead of the planner (repeatable; as `opend run --policy`).")
+@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True, callback=_check_hands)
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--axis", "axes", multiple=True, metavar="AXIS",
+              help="Only these perturbation axes (repeatable) [every axis, at both levels].")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--records", "records_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("build/robustness"), show_default=True,
+              help="Per-episode records, one resumable file per solver or agent: <dir>/<name>_<split>.jsonl.")
+@click.option("--out", "out_prefix", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("build/robustness/robustness"), show_default=True,
+              help="The table: <out>.md, <out>.json (counts only) and the plot <out>.png.")
+@click.option("--table-only", is_flag=True, default=False,
+              help="Run nothing: tabulate the records already under --records.")
+def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit, workers, records_dir, out_prefix,
+               table_only):
+    """Nominal and every perturbation axis at both levels, for each solver or agent: a table of success
+    with 95 % intervals against nominal, and a plot (docs/robustness.md)."""
+    from opend_mj.evaluation.pool import run_jobs
+    from opend_mj.evaluation.robustness import records_path, robustness_jobs, write_outputs
+    from opend_mj.evaluation.scoring import load_records
+    from opend_mj.sim.perturb import AXES, PerturbError
+
+    unknown = [a for a in axes if a not in AXES]
+    if unknown:
+        raise PerturbRefused(f"--axis {unknown[0]!r}: unknown perturbation axis; known: {', '.join(AXES)}")
+    axes = tuple(axes) or AXES
+    if not solvers and not policies:
+        raise click.UsageError("give at least one --solver or --policy")
+    entries = [(s, None, ()) for s in solvers]
+    for policy in policies:
+        from opend_mj.evaluation.agents import agent_name, load_agent, resolve_policy
+
+        try:
+            target, attr = resolve_policy(policy)
+            spec = f"{target}:{attr}"
+            entries.append((agent_name(load_agent(spec, ())), spec, ()))
+        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
+            raise click.BadParameter(f"{policy}: {exc}", param_hint="--policy") from None
+    paths = []
+    plans = []
+    for name, policy, args in entries:
+        path = records_path(records_dir, name, split)
+        paths.append(path)
+        if table_only:
+            continue
+        try:  # every scene of every entry checked before any episode runs
+            plans.append((path, robustness_jobs(cabinets_dir, hands, name, split=split, seed=seed, limit=limit,
+                                                axes=axes, policy=policy, policy_args=args)))
+        except PerturbError as exc:
+            raise PerturbRefused(str(exc)) from None
+    for path, jobs in plans:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        counts = run_jobs(jobs, path, workers=workers)
+        click.echo(f"{path}: {counts['ran']} episodes run, {counts['skipped']} already done, "
+                   f"{counts['errors']} errors", err=True)
+    from opend_mj.evaluation.jobs import make_jobs
+
+    # the table holds exactly this command's episodes (a records file may hold more: another --limit)
+    wanted = {(j.cabinet, j.joint, j.hand) for j in make_jobs(cabinets_dir, hands, "-", split=split, seed=seed,
+                                                              limit=limit)}
+    records = [r for r in load_records([p for p in paths if p.is_file()])
+               if (r["cabinet"], r["joint"], r["hand"]) in wanted and int(r.get("seed", 0)) == seed]
+    if not records:
+        raise click.ClickException(f"no records under {records_dir} for {', '.join(n for n, _, _ in entries)}")
+    words = ([f"--solver {x}" for x in solvers] + [f"--policy {x}" for x in policies]
+             + [f"--hand {h}" for h in hands] + [f"--split {split}", f"--cabinets {cabinets_dir}"]
+             + [f"--axis {a}" for a in axes if len(axes) < len(AXES)] + ([f"--limit {limit}"] if limit else [])
+             + ([f"--seed {seed}"] if seed else []))
+    write_outputs(records, out_prefix, title=f"Robustness ({split} split of {cabinets_dir})",
+                  label=f"{Path(cabinets_dir).name}, split {split}, seed {seed}"
+                        + (f", first {limit} targets" if limit else ""),
+                  command="opend robustness " + " ".join(words))
+    click.echo(out_prefix.with_suffix(".md").read_text())
+    click.echo(f"wrote {out_prefix.with_suffix('.md')}, .json, .png", err=True)

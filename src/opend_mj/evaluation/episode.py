@@ -56,6 +56,9 @@ EPISODE_FIELDS: tuple[EpisodeField, ...] = (
     EpisodeField("phrasing", None, always=False, tag=lambda v: f"i{zlib.crc32(str(v).encode()):08x}"),
     EpisodeField("physics_timestep", None, _rounded(9), in_scene=True, always=False, tag=lambda v: f"dt{v:.6g}"),
     EpisodeField("policy", None, in_key=False, always=False, tag=None),
+    #: A perturbation (`opend run --perturb`, `sim.perturb`): canonical ``AXIS=LEVEL[,...]``; None: nominal.
+    EpisodeField("perturb", None, in_scene=True, always=False,
+                 tag=lambda v: "x" + str(v).replace("=", "-").replace(",", "+")),
 )
 #: Fields that depend on the machine and the clock, not on the episode (left out when comparing runs).
 WALL_CLOCK_FIELDS = ("wall_seconds",)
@@ -92,6 +95,9 @@ class EpisodeJob:
     #: arguments ((key, value), ...). Not part of the key: the agent's name is the ``solver``.
     policy: str | None = None
     policy_args: tuple = ()
+    #: A perturbation (`sim.perturb`, canonical ``AXIS=LEVEL[,AXIS=LEVEL]``), drawn from the scene's
+    #: seed; None: the nominal scene.
+    perturb: str | None = None
 
     def key(self) -> tuple:
         return episode_key(asdict(self))

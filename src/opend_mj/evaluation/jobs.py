@@ -13,7 +13,8 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
               light_scale: float = 1.0, pull: str = "arc", limit: int | None = None,
               video_dir: Path | None = None, cabinet_ids: Iterable[str] | None = None,
               paraphrase: int = 0, physics_timestep: float | None = None,
-              targets: Iterable[str] | None = None, kind: str | None = None) -> list[EpisodeJob]:
+              targets: Iterable[str] | None = None, kind: str | None = None,
+              perturb: str | None = None) -> list[EpisodeJob]:
     """Episodes of a run, hand by hand over the split's (cabinet, target) pairs in manifest order.
 
     ``cabinet_ids`` keeps whole cabinets; ``targets`` keeps ``"ID"`` (every target of a cabinet) or
@@ -48,7 +49,8 @@ def make_jobs(cabinets_dir: Path, hands: Iterable[str], solver: str, split: str 
                                    light_scale=light_scale, pull=pull,
                                    video_dir=str(video_dir) if video_dir else None,
                                    target_type=tgt.get("type"), instruction=tgt.get("instruction"),
-                                   paraphrase=paraphrase, physics_timestep=physics_timestep))
+                                   paraphrase=paraphrase, physics_timestep=physics_timestep,
+                                   perturb=perturb))
     return jobs
 
 
@@ -61,3 +63,27 @@ def group_jobs(jobs: list[EpisodeJob], max_size: int = 8) -> list[tuple[EpisodeJ
         else:
             groups.append([job])
     return [tuple(g) for g in groups]
+
+
+def check_perturbed_scenes(jobs: list[EpisodeJob]) -> int:
+    """Refuse (`sim.perturb.PerturbError`, one line naming the cabinet and the perturbation) a run in
+    which a perturbation makes a scene invalid: the camera inside the cabinet, a distractor at the
+    hand's start or on its way. Geometry only (cabinet.json's bounds; nothing compiles), so it runs
+    before any episode. Returns how many perturbed scenes were checked."""
+    from opend_mj.evaluation.episode import scene_seed
+    from opend_mj.sim.cabinet import load_cabinet_info
+    from opend_mj.sim import perturb
+    from opend_mj.sim.task import TaskConfig, scene_geometry
+
+    seen = set()
+    for job in jobs:
+        if job.perturb is None or scene_key(job) in seen:
+            continue
+        seen.add(scene_key(job))
+        info = load_cabinet_info(Path(job.cabinet_dir))
+        bounds = (info["bounds"]["min"], info["bounds"]["max"])
+        config = TaskConfig(perturb=job.perturb, perturb_config=perturb.DEFAULT_CONFIG)
+        shift = perturb.SceneShift.draw(job.perturb, scene_seed(job), bounds, config.perturb_config)
+        pose, start = scene_geometry(bounds, config, shift)
+        shift.check(bounds, pose.pos, start, label=f"{job.cabinet_dir}")
+    return len(seen)

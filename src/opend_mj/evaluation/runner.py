@@ -139,13 +139,33 @@ def instruction_for(job: EpisodeJob) -> str | None:
     """The job's own phrasing, its paraphrased instruction, or None for the target's own (Algorithm 1)."""
     if job.phrasing is not None:
         return job.phrasing
-    if not job.paraphrase:
+    from opend_mj.sim.perturb import perturb_items
+
+    level = perturb_items(job.perturb).get("instruction")
+    if not job.paraphrase and level is None:
         return None
     from opend_mj.language import Description, paraphrase
     from opend_mj.sim.cabinet import load_cabinet_info
 
     target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
-    return paraphrase(Description(target["vertical"], target["horizontal"], target["type"]), job.paraphrase)
+    description = Description(target["vertical"], target["horizontal"], target["type"])
+    if level is not None:
+        return perturbed_instruction(description, level, scene_seed(job), job.joint)
+    return paraphrase(description, job.paraphrase)
+
+
+def perturbed_instruction(description, level: str, seed: int, joint: str) -> str:
+    """The instruction axis of `sim.perturb`: a rewording drawn from the scene's seed and the
+    target (mild: one of the fixed paraphrase templates; strong: one drawn from the grammar)."""
+    import zlib
+
+    from opend_mj.language import paraphrase, rewordings
+    from opend_mj.sim.perturb import AXES, PerturbConfig
+
+    rng = np.random.default_rng([int(seed), 48, AXES.index("instruction"), zlib.crc32(joint.encode())])
+    if PerturbConfig().level(level).instruction == "paraphrase":
+        return paraphrase(description, 1 + int(rng.integers(3)))
+    return rewordings(description, n=1, seed=int(rng.integers(2**31)))[0]
 
 
 def make_episode_env(job: EpisodeJob):
@@ -153,7 +173,7 @@ def make_episode_env(job: EpisodeJob):
 
     spec_ep = EpisodeSpec(cabinet_dir=Path(job.cabinet_dir), target_joint=job.joint, hand=job.hand,
                           seed=scene_seed(job), room=job.room, instruction=instruction_for(job))
-    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6)
+    config = TaskConfig(enable_rgbd=False, light_scale=job.light_scale, time_limit=1e6, perturb=job.perturb)
     if job.physics_timestep is not None:
         config = replace(config, physics_timestep=float(job.physics_timestep))
     return make_environment(spec_ep, config, observations=False)  # every caller reads MjData itself
@@ -185,6 +205,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     instruction = task.instruction
 
     rgb, depth = cam.render()  # the one observation
+    depth = task.sense_depth(rgb, depth)
     view = task.camera_view(physics)
     gt_box = task.handle_boxes(physics)[target.joint]
 
@@ -217,7 +238,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         if video:
             video.capture()
 
-    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: cam.render()[1])
+    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: task.sense_depth(*cam.render()))
     planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
                             overrides=job.planner_overrides,
                             ground_truth=lambda: task.handle_boxes(physics)[target.joint], on_stage=on_stage)

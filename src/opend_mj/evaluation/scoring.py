@@ -22,6 +22,32 @@ KINDS = ("drawer", "door", "overall")
 STAGE_ORDER = ("language", "locate", "approach", "grasp", "pull", "physics", "error")
 
 
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a success rate of ``k`` in ``n`` (95 % for z = 1.96), as
+    fractions; (0, 1) for no episodes. Unlike the normal approximation it stays inside [0, 1] and
+    is not empty at 0 or n successes."""
+    if n <= 0:
+        return 0.0, 1.0
+    p = k / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / den
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def interval_text(k: int, n: int) -> str:
+    """``[lo-hi]``: the 95 % Wilson interval in percent (one decimal)."""
+    lo, hi = wilson(k, n)
+    return f"[{100 * lo:.1f}-{100 * hi:.1f}]"
+
+
+def intervals_overlap(a: tuple[int, int], b: tuple[int, int]) -> bool:
+    """Whether the 95 % Wilson intervals of two (successes, episodes) overlap (their difference is
+    then not clear at that level)."""
+    (alo, ahi), (blo, bhi) = wilson(*a), wilson(*b)
+    return alo <= bhi and blo <= ahi
+
+
 def load_records(paths: Iterable[Path]) -> list[dict]:
     from opend_mj.evaluation.episode import episode_key
     from opend_mj.evaluation.results import load_results
@@ -75,10 +101,16 @@ def _kind(r: dict) -> str | None:
         return None
 
 
+def entry_name(r: dict) -> str:
+    """The solver / agent column of a record: its solver, with its perturbation where it has one
+    (``oracle [light=strong]``), so perturbed and nominal runs never pool."""
+    return f"{r['solver']} [{r['perturb']}]" if r.get("perturb") else r["solver"]
+
+
 def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
     out: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in records:
-        out[(r["hand"], r["solver"])].append(r)
+        out[(r["hand"], entry_name(r))].append(r)
     return dict(sorted(out.items()))
 
 
@@ -107,10 +139,11 @@ def success_table(records: list[dict], threshold: float = 0.2, measure: str = "o
 
 
 def _fmt(cell) -> str:
+    """``rate (k/n) [lo-hi]``: percent, counts and the 95 % Wilson interval."""
     rate, k, n = cell
     if not n:
         return "-"
-    return "n/a" if rate is None else f"{100 * rate:.1f} ({k}/{n})"
+    return "n/a" if rate is None else f"{100 * rate:.1f} ({k}/{n}) {interval_text(k, n)}"
 
 
 def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
@@ -133,7 +166,18 @@ def ranking(records: list[dict], threshold: float = 0.2) -> list[dict]:
     rows.sort(key=lambda r: (-rate(r["test_overall"]), -rate(r["train_overall"])))
     for i, r in enumerate(rows, 1):
         r["rank"] = i
+    for r in rows:  # which other entries' 95 % intervals overlap this one's (same split as ranked)
+        split = "test_overall" if r["test_overall"][2] else "train_overall"
+        r["overlaps"] = [o["rank"] for o in rows if o is not r and o[split][2] and r[split][2]
+                         and intervals_overlap(r[split][1:], o[split][1:])]
     return rows
+
+
+def overlap_note(row: dict) -> str:
+    """The ranking's note: which ranks a row's 95 % interval overlaps (not clearly different)."""
+    if not row.get("overlaps"):
+        return "clear of all others"
+    return "overlaps " + ", ".join(f"#{k}" for k in row["overlaps"])
 
 
 def _episodes_with(records: list[dict], field: str, title: str, column: str, only_with: bool = False) -> list[str]:
@@ -155,16 +199,18 @@ def report_markdown(records: list[dict]) -> str:
     lines = [f"# Results ({len(records)} episodes)", ""]
     lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
     lines.append("")
-    lines.append("Beside each 20 % figure, ManiSkill3's criterion: the joint at >= 75 % of its range.")
+    lines.append("Beside each 20 % figure, ManiSkill3's criterion: the joint at >= 75 % of its range. Every "
+                 "rate has its 95 % Wilson interval in brackets; the last column names the entries whose "
+                 "interval (of the ranked overall rate) overlaps this one's: their order is not clear.")
     lines.append("")
     lines.append("| rank | solver / agent | hand | test overall | test >= 75 % range | test drawer | test door | "
-                 "train overall | train >= 75 % range | episodes | wrong target opened |")
-    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+                 "train overall | train >= 75 % range | episodes | wrong target opened | 95 % intervals |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in ranking(records):
         lines.append(f"| {r['rank']} | {r['solver']} | {r['hand']} | {_fmt(r['test_overall'])} | "
                      f"{_fmt(r['test_overall_range'])} | {_fmt(r['test_drawer'])} | {_fmt(r['test_door'])} | "
                      f"{_fmt(r['train_overall'])} | {_fmt(r['train_overall_range'])} | "
-                     f"{r['episodes']} | {r['wrong_targets']} |")
+                     f"{r['episodes']} | {r['wrong_targets']} | {overlap_note(r)} |")
     lines.append("")
     for th in THRESHOLDS:
         lines.append(f"## Success rate, open ratio > {int(round(th * 100))} %")
@@ -233,14 +279,17 @@ def write_csv(records: list[dict], path: Path) -> Path:
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["hand", "solver", "measure", "threshold", "split", "kind", "success_rate", "successes",
-                    "episodes"])
+                    "episodes", "ci95_low", "ci95_high"])
         for measure, th in [("open_ratio", t) for t in THRESHOLDS] + [("range", RANGE_THRESHOLD)]:
             for row in success_table(records, th, "open" if measure == "open_ratio" else "range"):
                 for s in SPLITS:
                     for k in KINDS:
                         rate, n_ok, n = row[f"{s}_{k}"]
+                        lo, hi = wilson(n_ok, n)
                         w.writerow([row["hand"], row["solver"], measure, th, s, k,
-                                    "" if rate is None else f"{rate:.4f}", n_ok, n])
+                                    "" if rate is None else f"{rate:.4f}", n_ok, n,
+                                    "" if rate is None or not n else f"{lo:.4f}",
+                                    "" if rate is None or not n else f"{hi:.4f}"])
     return path
 
 
@@ -260,7 +309,11 @@ def plot_success(records: list[dict], path: Path, threshold: float = 0.2) -> Pat
     fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(rows)), 4))
     for i, (s, k) in enumerate(cols):
         vals = [100 * (r[f"{s}_{k}"][0] or 0.0) for r in rows]
-        ax.bar(x + (i - (len(cols) - 1) / 2) * width, vals, width, label=f"{s} {k}")
+        bounds = [wilson(*r[f"{s}_{k}"][1:]) if r[f"{s}_{k}"][2] else (0.0, 0.0) for r in rows]
+        err = [[max(0.0, v - 100 * lo) for v, (lo, _) in zip(vals, bounds)],
+               [max(0.0, 100 * hi - v) if hi else 0.0 for v, (_, hi) in zip(vals, bounds)]]
+        ax.bar(x + (i - (len(cols) - 1) / 2) * width, vals, width, label=f"{s} {k}", yerr=err, capsize=2,
+               error_kw={"elinewidth": 0.8})
     ax.set_xticks(x)
     ax.set_xticklabels(labels)
     ax.set_ylabel(f"success (%), open ratio > {int(threshold * 100)} %")

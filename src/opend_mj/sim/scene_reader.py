@@ -166,8 +166,11 @@ class SceneReader:
         return self._camera
 
     def render(self) -> tuple[np.ndarray, np.ndarray]:
-        """(rgb uint8 HxWx3, depth float32 HxW metres) of the current state."""
-        return self._renderer().render()
+        """(rgb uint8 HxWx3, depth float32 HxW metres) of the current state (the depth as the
+        task's sensor gives it: `OpenCabinetTask.sense_depth`)."""
+        rgb, depth = self._renderer().render()
+        sense = getattr(self.env.task, "sense_depth", None)
+        return rgb, (depth if sense is None else sense(rgb, depth))
 
     def render_rgb(self) -> np.ndarray:
         return self._renderer().render_rgb()

@@ -28,6 +28,7 @@ from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
 from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
+from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 
@@ -55,6 +56,9 @@ class TaskConfig:
     #: True: the control step runs in compiled code (`opend_mj.sim.fast`) where it loads; the same
     #: numbers as the Python step, which runs otherwise (False, ``OPEND_FASTSTEP=0``, no compiler)
     compiled_step: bool = True
+    #: A perturbation (`sim.perturb`: ``AXIS=LEVEL[,AXIS=LEVEL]``), drawn from the episode's seed; None: nominal
+    perturb: str | None = None
+    perturb_config: PerturbConfig = DEFAULT_CONFIG
 
     def __post_init__(self):
         if not (self.control_hz > 0 and self.physics_timestep > 0):
@@ -165,8 +169,15 @@ class OpenCabinetTask(composer.Task):
         self.hand = Hand(episode.hand)
         self.mocap = attach_with_mocap(self._arena, self.hand)
         lo, hi = self.cabinet.bounds
-        self.camera_pose = place_camera(lo, hi, fovy_deg=config.camera_fovy, shift=config.camera_shift)
+        #: the perturbation's values for this scene (neutral without one)
+        self.shift = SceneShift.draw(config.perturb, episode.seed, (lo, hi), config.perturb_config)
+        self.camera_pose, start = scene_geometry((lo, hi), config, self.shift)
+        self.shift.check((lo, hi), self.camera_pose.pos, start, label=f"{self.cabinet.directory}")
         self.camera = self._arena.add_camera(self.camera_pose, name="front")
+        self._handle_geoms = [g for t in self.cabinet.targets for g in t.handle_geoms]
+        self.shift.apply_mjcf(self._arena, self.cabinet, self._handle_geoms)
+        #: what turns each rendered depth image into the sensor's (None: the rendered one as it is)
+        self.depth_sensor = self.shift.depth_sensor()
         self.checker = SuccessChecker(self.cabinet, self.target, config.success_threshold, config.moved_threshold)
         self._n_fingers = len(self.hand.actuators)
         self._workspace = (lo - config.workspace_margin, hi + config.workspace_margin)
@@ -231,7 +242,12 @@ class OpenCabinetTask(composer.Task):
         self._hand_qpos, self._root_id, self._target_qpos = ids["hand_qpos"], ids["root"], ids["target_qpos"]
 
     def after_compile(self, physics, random_state):
+        self.shift.apply_model(physics, self.cabinet, self._handle_geoms)
         self._cache_state(physics)
+
+    def sense_depth(self, rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """The depth image solvers and agents receive for a render (the sensor's, under depth_noise)."""
+        return depth if self.depth_sensor is None else self.depth_sensor(rgb, depth)
 
     def _add_observables(self) -> None:
         size = self.config.image_size
@@ -375,6 +391,8 @@ class OpenCabinetTask(composer.Task):
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
         self._cache_state(physics)
+        if self.depth_sensor is not None:
+            self.depth_sensor.count = 0  # each episode of a scene sees the same sensor draws
         self.cabinet.close_all(physics)
         pos, quat = self.initial_root_pose(physics)
         self.mocap.reset_pose(physics, pos, quat)
@@ -421,18 +439,9 @@ class OpenCabinetTask(composer.Task):
 
     def initial_root_pose(self, physics) -> tuple[np.ndarray, np.ndarray]:
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
-        lo, hi = self.cabinet.bounds
         quat = orientation_for_handle("horizontal")
-        x = lo[0] - 0.35
-        z = float(np.clip((lo[2] + hi[2]) / 2, 0.3, 1.2))
         view = camera_view(physics, self.camera.full_identifier, self.config.image_size, self.config.image_size)
-        y = hi[1] + 0.25
-        for _ in range(40):
-            u, _v = view.project(np.array([[x, y, z]]))[0]
-            if not np.isfinite(u) or u < -0.25 * self.config.image_size:
-                break
-            y += 0.05
-        return np.array([x, y, z]), np.asarray(quat, float)
+        return start_position(self.cabinet.bounds, view, self.config.image_size), np.asarray(quat, float)
 
     def open_ratio(self, physics) -> float:
         """The instructed target's open ratio (what the success checker compares to the threshold)."""
@@ -471,6 +480,34 @@ class OpenCabinetTask(composer.Task):
 
         view = self.camera_view(physics)
         return {t.joint: box_in_image(self.handle_corners(physics, t), view) for t in self.cabinet.targets}
+
+
+def start_position(bounds, view, image_size: int) -> np.ndarray:
+    """The hand root's start (world, m): between camera and cabinet, beside the cabinet's +y side and
+    out of the camera's view (``view``: a `sim.camera.CameraView`)."""
+    lo, hi = (np.asarray(b, float) for b in bounds)
+    x = lo[0] - 0.35
+    z = float(np.clip((lo[2] + hi[2]) / 2, 0.3, 1.2))
+    y = hi[1] + 0.25
+    for _ in range(40):
+        u, _v = view.project(np.array([[x, y, z]]))[0]
+        if not np.isfinite(u) or u < -0.25 * image_size:
+            break
+        y += 0.05
+    return np.array([x, y, z])
+
+
+def scene_geometry(bounds, config: TaskConfig, shift: SceneShift):
+    """(the front camera's pose, the hand's start position) of a scene, from the cabinet's bounds
+    alone (no compile): what `SceneShift.check` needs before any episode runs."""
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    lo, hi = bounds
+    pose = shift.move_camera(place_camera(lo, hi, fovy_deg=config.camera_fovy, shift=config.camera_shift))
+    size = config.image_size
+    view = CameraView(CameraIntrinsics.from_fovy(pose.fovy, size, size), np.asarray(pose.pos, float),
+                      np.asarray(pose.rot, float))
+    return pose, start_position(bounds, view, size)
 
 
 import mujoco as _mujoco  # noqa: E402
