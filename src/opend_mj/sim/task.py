@@ -15,7 +15,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import collections  # noqa: E402
-from dataclasses import dataclass, field  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import dm_env  # noqa: E402
@@ -31,6 +31,7 @@ from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
 from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
+from opend_mj.sim.success import Outcome, SuccessChecker  # noqa: E402,F401  (Outcome: part of this module's API)
 
 
 @dataclass(frozen=True)
@@ -85,42 +86,6 @@ class EpisodeSpec:
         if self.room is not None:
             return int(self.room)
         return int(np.random.default_rng([self.seed, 9]).integers(len(ROOM_NAMES)))
-
-
-@dataclass
-class Outcome:
-    """What the success checker reports about the current state."""
-
-    success: bool
-    open_ratio: float
-    range_ratio: float
-    joint_value: float
-    others_moved: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict:
-        return {"success": self.success, "open_ratio": self.open_ratio, "range_ratio": self.range_ratio,
-                "joint_value": self.joint_value, "others_moved": self.others_moved}
-
-
-class SuccessChecker:
-    """The instructed target's open ratio against a threshold; which other targets moved."""
-
-    def __init__(self, cabinet: Cabinet, target: Target, threshold: float, moved_threshold: float):
-        self.cabinet = cabinet
-        self.target = target
-        self.threshold = threshold
-        self.moved_threshold = moved_threshold
-
-    def check_values(self, values: dict[str, float]) -> Outcome:
-        q = values[self.target.joint]
-        ratio = self.target.open_ratio(q)
-        others = [t.joint for t in self.cabinet.targets
-                  if t.joint != self.target.joint and t.range_ratio(values[t.joint]) > self.moved_threshold]
-        return Outcome(success=ratio > self.threshold, open_ratio=ratio, range_ratio=self.target.range_ratio(q),
-                       joint_value=q, others_moved=others)
-
-    def check(self, physics) -> Outcome:
-        return self.check_values(self.cabinet.joint_values(physics))
 
 
 class OpenCabinetTask(composer.Task):
