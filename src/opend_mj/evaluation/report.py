@@ -240,6 +240,11 @@ def results_markdown(results_dir: Path) -> str:
     return "\n".join(out)
 
 
+#: What `opend robustness` writes under results/ (`make robustness`, `make robustness-real`): its records,
+#: tables and plots; the report reads the tables (``*.json``).
+ROBUSTNESS_RESULTS = ("robustness/*", "real/robustness_*")
+
+
 def robustness_sections(results_dir: Path) -> list[str]:
     """The robustness tables (`opend robustness`): generated (results/robustness/*.json) and real
     (results/real/robustness_*.json, counts only), each with the label of the run that made it."""
