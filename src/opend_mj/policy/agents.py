@@ -151,13 +151,10 @@ class PlannerAgent:
     def __init__(self, solver: Any = "cliport", pull: str = "arc", use_grasp_file: bool = True,
                  name: str | None = None, **solver_options):
         if isinstance(solver, str):
-            from opend_mj.policy.factory import build_solver
-            from opend_mj.policy.solvers import needs_ground_truth
+            from opend_mj.policy.factory import agent_solver
 
-            if needs_ground_truth(solver):
-                build_solver(solver, for_agent=True)  # refused, with the reason
+            self._factory = agent_solver(solver, **solver_options)
             self._solver_name, self._solver = solver, None
-            self._factory = lambda: build_solver(solver, for_agent=True, **solver_options)
         else:
             self._solver_name, self._solver = getattr(solver, "name", type(solver).__name__), solver
         self.pull = pull

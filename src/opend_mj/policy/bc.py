@@ -57,13 +57,10 @@ class BCAgent:
     def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
                  name: str | None = None, stop_time: float | None = None, ensemble_decay: float | None = None,
                  drawer: str | None = None, door: str | None = None, **solver_options):
-        from opend_mj.policy.factory import build_solver
-        from opend_mj.policy.solvers import needs_ground_truth
+        from opend_mj.policy.factory import agent_solver
 
-        if needs_ground_truth(solver):
-            build_solver(solver, for_agent=True)  # refused, with the reason
+        self._factory = agent_solver(solver, **solver_options)
         self._solver_name = solver
-        self._factory = lambda: build_solver(solver, for_agent=True, **solver_options)
         self._solver = None
         self.checkpoint = checkpoint
         self.kind_checkpoints = {"drawer": drawer, "door": door}

@@ -44,6 +44,14 @@ def build_solver(solver: str | Any, ground_truth: Callable[[], Any] | None = Non
     return solver_factory(solver)(**options)
 
 
+def agent_solver(solver: str, **options) -> Callable[[], HandleSolver]:
+    """For an agent: the builder of the registered solver ``solver`` (made on first use, with
+    ``options``); a solver that reads the simulator is refused at once, with the reason."""
+    if needs_ground_truth(solver):
+        build_solver(solver, for_agent=True)  # raises, naming the solver
+    return lambda: build_solver(solver, for_agent=True, **options)
+
+
 def planner_config(hand: HandModel, pull: str = "arc", use_grasp_file: bool = True,
                    overrides: dict | tuple = ()) -> PlannerConfig:
     """The planner's configuration for ``hand``: ``pull`` ("arc" | "straight"), the hand's grasp tuning
