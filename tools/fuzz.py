@@ -412,9 +412,13 @@ def _reason(line: str) -> str:
 
 
 def base_sources(root: Path, real: Path | None, real_only: bool = False) -> list[Path]:
-    from opend_mj.assets.procedural import generate_source
+    from opend_mj.assets.procedural import find_cabinets, write_source
 
-    bases = [] if real_only else [generate_source(13, 0, root), generate_source(1, 0, root)]  # a door, a drawer
+    def single(kind: str):  # the first describable generated cabinet with one target of this kind
+        return find_cabinets(lambda c: len(c.targets) == 1 and c.targets[0].kind == kind
+                             and c.targets[0].hinge in ("", "left", "right"))[0]
+
+    bases = [] if real_only else [write_source(single("door"), root), write_source(single("drawer"), root)]
     if real is not None:
         bases.append(Path(shutil.copytree(real, root / real.name)))
     return bases

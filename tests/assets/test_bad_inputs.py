@@ -12,10 +12,14 @@ import pytest
 
 from opend_mj.assets.compiler import compile_cabinet
 from opend_mj.assets.dataset import build_dataset
-from opend_mj.assets.procedural import generate_source
+from opend_mj.assets.procedural import find_cabinets, write_source
 
-#: proc_0013 of seed 0 is a single door (revolute joint), proc_0001 a single drawer; both describable.
-DOOR_INDEX, DRAWER_INDEX = 13, 1
+
+def _single(kind: str):
+    """The first describable generated cabinet (seed 0) with one target, of this kind, side-hinged if a door."""
+    (cabinet,) = find_cabinets(lambda c: len(c.targets) == 1 and c.targets[0].kind == kind
+                               and c.targets[0].hinge in ("", "left", "right"))
+    return cabinet
 
 
 def _obj(source: Path, k: int) -> Path:
@@ -97,7 +101,7 @@ CASES: dict[str, tuple[Callable[[Path], Path], str, str]] = {
 @pytest.fixture(scope="module")
 def good_sources(tmp_path_factory) -> list[Path]:
     root = tmp_path_factory.mktemp("good")
-    return [generate_source(DOOR_INDEX, 0, root), generate_source(DRAWER_INDEX, 0, root)]
+    return [write_source(_single("door"), root), write_source(_single("drawer"), root)]
 
 
 def _broken(good: Path, root: Path, name: str) -> tuple[Path, Path]:

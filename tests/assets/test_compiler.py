@@ -372,16 +372,17 @@ def test_gravity_loaded_joints_are_counterbalanced():
     assert _gravity_loaded(joint("slide", [0, 0, 1]))
 
 
-def test_only_flaps_are_counterbalanced(proc_sources, tmp_path, compile_cache):
+def test_only_flaps_are_counterbalanced(tmp_path, compile_cache):
     """Side-hinged doors and drawers carry no counterbalance; a flap (a door on a horizontal hinge)
     does, as a gas strut holds a real one, so that it stays where the hand leaves it."""
-    import json
+    from opend_mj.assets.procedural import find_cabinets, write_source
 
-    flapped = [s for s in proc_sources if any(t["hinge"] in ("top", "bottom") for t in
-                                              json.loads((s / "meta.json").read_text())["procedural"]["targets"])]
-    assert flapped, "no flap among the procedural test sources: raise N_PROC_SOURCES"
-    result = compile_cabinet(flapped[0], tmp_path, cache_dir=compile_cache)
+    (cabinet,) = find_cabinets(lambda c: any(t.hinge in ("top", "bottom") for t in c.targets)
+                               and any(t.hinge not in ("top", "bottom") for t in c.targets))
+    source = write_source(cabinet, tmp_path / "src")
+    result = compile_cabinet(source, tmp_path, cache_dir=compile_cache)
     assert result.status in ("built", "cached"), result.message
+    flapped = [source]
     counterbalanced = {}
     for body in ET.parse(tmp_path / flapped[0].name / "cabinet.xml").getroot().iter("body"):
         joint = body.find("joint")
@@ -389,4 +390,4 @@ def test_only_flaps_are_counterbalanced(proc_sources, tmp_path, compile_cache):
             axis = np.array([float(v) for v in joint.get("axis").split()])
             flap = joint.get("type") == "hinge" and abs(axis[2]) < 0.5
             counterbalanced.setdefault(flap, set()).add(body.get("gravcomp") == "1")
-    assert counterbalanced[True] == {True} and counterbalanced.get(False, {False}) == {False}, counterbalanced
+    assert counterbalanced == {True: {True}, False: {False}}, counterbalanced

@@ -13,15 +13,24 @@ import numpy as np
 import pytest
 
 from opend_mj.assets.compiler import compile_cabinet
-from opend_mj.assets.procedural import generate_source
-
-#: proc_0013 of seed 0: one door on revolute joint_0 (link_0), carcass link_1.
-DOOR_INDEX = 13
+from opend_mj.assets.procedural import find_cabinets, write_source
 
 
 @pytest.fixture(scope="module")
 def door(tmp_path_factory) -> Path:
-    return generate_source(DOOR_INDEX, 0, tmp_path_factory.mktemp("good"))
+    """A generated cabinet with one side-hinged door: revolute joint_0 (link_0), carcass link_1."""
+    (cabinet,) = find_cabinets(lambda c: len(c.targets) == 1 and c.targets[0].kind == "door"
+                               and c.targets[0].hinge in ("left", "right"))
+    return write_source(cabinet, tmp_path_factory.mktemp("good"))
+
+
+def _joint0(src: Path) -> dict[str, str]:
+    """joint_0's origin coordinates (x, y, z), axis and upper limit as written in the URDF."""
+    text = (src / "mobility.urdf").read_text()
+    joint = text[text.index('<joint name="joint_0"'):]
+    x, y, z = re.search(r'<origin xyz="([^"]+)"/>', joint).group(1).split()
+    return {"x": x, "y": y, "z": z, "axis": re.search(r'<axis xyz="([^"]+)"/>', joint).group(1),
+            "upper": re.search(r'upper="([^"]+)"', joint).group(1)}
 
 
 def _copy(door: Path, tmp_path: Path) -> Path:
@@ -45,34 +54,33 @@ def _refused(src: Path, tmp_path: Path, reason: str, *words: str) -> str:
     return result.message
 
 
-JOINT_ORIGIN = '<origin xyz="0.311008 0.071571 0.300193"/>'
-
-
 @pytest.mark.parametrize("origin, words", [
-    ('<origin xyz="nan 0.071571 0.300193"/>', [r"joint 'joint_0' <origin> xyz='nan 0\.071571 0\.300193'", "not finite"]),
-    ('<origin xyz="0.311008 inf 0.300193"/>', [r"joint 'joint_0' <origin> xyz=.*inf", "not finite"]),
-    ('<origin xyz="0.311008 0.071571 0.300193" rpy="0 nan 0"/>', [r"joint 'joint_0' <origin> rpy='0 nan 0'", "not finite"]),
-    ('<origin xyz="0.311008 0.071571 0.300193" rpy="-inf 0 0"/>', [r"rpy='-inf 0 0'", "not finite"]),
-    ('<origin xyz="1e9 0.071571 0.300193"/>', [r"xyz='1e9", "offset of 7e\\+08 m"]),
+    ('<origin xyz="nan {y} {z}"/>', [r"joint 'joint_0' <origin> xyz='nan {y} {z}'", "not finite"]),
+    ('<origin xyz="{x} inf {z}"/>', [r"joint 'joint_0' <origin> xyz=.*inf", "not finite"]),
+    ('<origin xyz="{x} {y} {z}" rpy="0 nan 0"/>', [r"joint 'joint_0' <origin> rpy='0 nan 0'", "not finite"]),
+    ('<origin xyz="{x} {y} {z}" rpy="-inf 0 0"/>', [r"rpy='-inf 0 0'", "not finite"]),
+    ('<origin xyz="1e9 {y} {z}"/>', [r"xyz='1e9", "offset of 7e\\+08 m"]),
 ])
 def test_non_finite_or_absurd_joint_origin(door, tmp_path, origin, words):
     """Not "targets joint_0 and joint_1 both read 'door'" found by the language stage on NaN geometry:
     the joint, its origin and the value, from where the URDF is read."""
     src = _copy(door, tmp_path)
-    _edit(src, JOINT_ORIGIN, origin)
-    _refused(src, tmp_path, "urdf_error", *words)
+    joint = _joint0(src)
+    _edit(src, '<origin xyz="{x} {y} {z}"/>'.format(**joint), origin.format(**joint))
+    _refused(src, tmp_path, "urdf_error", *(w.format(**{k: re.escape(v) for k, v in joint.items()}) for w in words))
 
 
 @pytest.mark.parametrize("limit, words", [
     ('<limit lower="0.0" upper="nan"/>', [r"joint 'joint_0' <limit> upper='nan'", "not finite"]),
-    ('<limit lower="-inf" upper="1.782979"/>', [r"<limit> lower='-inf'", "not finite"]),
+    ('<limit lower="-inf" upper="{upper}"/>', [r"<limit> lower='-inf'", "not finite"]),
     ('<limit lower="0.0" upper="40"/>', [r"upper='40'", "beyond one turn"]),
     ('<limit lower="0.0" upper="one"/>', [r"upper='one'", "not a number"]),
 ])
 def test_bad_joint_limit_is_named_as_such(door, tmp_path, limit, words):
     """A NaN limit is a non-finite number, not "has no limits"."""
     src = _copy(door, tmp_path)
-    _edit(src, '<limit lower="0.0" upper="1.782979"/>', limit)
+    upper = _joint0(src)["upper"]
+    _edit(src, f'<limit lower="0.0" upper="{upper}"/>', limit.format(upper=upper))
     message = _refused(src, tmp_path, "urdf_error", *words)
     assert "has no limits" not in message
 
@@ -83,7 +91,7 @@ def test_bad_joint_limit_is_named_as_such(door, tmp_path, limit, words):
 ])
 def test_bad_axis(door, tmp_path, attr, words):
     src = _copy(door, tmp_path)
-    _edit(src, '<axis xyz="0 1 0"/>', attr)
+    _edit(src, f'<axis xyz="{_joint0(src)["axis"]}"/>', attr)
     _refused(src, tmp_path, "urdf_error", *words)
 
 

@@ -9,11 +9,12 @@ import pytest
 
 @pytest.fixture(scope="module")
 def drawer_cabinet(tmp_path_factory) -> Path:
-    """Generated cabinet proc_0004 (a drawer stack, seed 0), compiled into a temporary folder."""
+    """The first generated stack of three drawers (seed 0), compiled into a temporary folder."""
     from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.assets.procedural import generate_source
+    from opend_mj.assets.procedural import find_cabinets, write_source
 
+    (cabinet,) = find_cabinets(lambda c: len(c.targets) == 3 and all(t.kind == "drawer" for t in c.targets))
     root = tmp_path_factory.mktemp("eval_cabinets")
-    src = generate_source(4, 0, root / "src")
+    src = write_source(cabinet, root / "src")
     compile_cabinet(src, root / "built", cache_dir=root / "cache")
-    return root / "built" / "proc_0004"
+    return root / "built" / cabinet.id

@@ -37,7 +37,7 @@ def test_resume_after_interruption(tmp_path, drawer_cabinet):
     assert counts["ran"] == 1
     # simulate a kill -9 while the parent was writing the next line
     with open(out, "ab") as f:
-        f.write(b'{"cabinet": "proc_0004", "joint": "joint_1", "hand": "franka", "solv')
+        f.write(f'{{"cabinet": "{drawer_cabinet.name}", "joint": "joint_1", "hand": "franka", "solv'.encode())
     everything = _jobs(drawer_cabinet, ["joint_0", "joint_1"])
     counts = run_jobs(everything, out, workers=1, progress=False)
     assert counts == {"total": 2, "skipped": 1, "ran": 1, "errors": 0, "success": counts["success"]}

@@ -34,10 +34,17 @@ def ray_instance():
 
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory) -> list[Path]:
-    from opend_mj.assets.procedural import generate_source
+    """Three generated cabinets (seed 0): one drawer, a stack of three drawers, one side-hinged door."""
+    from opend_mj.assets.procedural import find_cabinets, write_source
+
+    def first(where):
+        return find_cabinets(where)[0]
 
     root = tmp_path_factory.mktemp("ray_sources")
-    return [generate_source(i, 0, root) for i in (1, 4, 5)]
+    return [write_source(c, root) for c in (
+        first(lambda c: len(c.targets) == 1 and c.targets[0].kind == "drawer"),
+        first(lambda c: len(c.targets) == 3 and all(t.kind == "drawer" for t in c.targets)),
+        first(lambda c: len(c.targets) == 1 and c.targets[0].hinge in ("left", "right")))]
 
 
 @pytest.fixture(scope="module")

@@ -30,16 +30,30 @@ from opend_mj.evaluation.results import load_results
 HAND = "franka"  # the quickest hand
 
 
+def _first(where):
+    from opend_mj.assets.procedural import find_cabinets
+
+    return find_cabinets(where)[0]
+
+
+#: three generated cabinets (seed 0): four side-hinged doors, one drawer, a stack of three drawers
+DOORS = _first(lambda c: len(c.targets) == 4 and all(t.kind == "door" and t.hinge in ("left", "right")
+                                                      for t in c.targets))
+DRAWER = _first(lambda c: len(c.targets) == 1 and c.targets[0].kind == "drawer")
+STACK = _first(lambda c: len(c.targets) == 3 and all(t.kind == "drawer" for t in c.targets))
+
+
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
     """Three procedural cabinets (4 doors, 4 drawers) with a manifest, built once for this module."""
     from opend_mj.assets.dataset import build_dataset
-    from opend_mj.assets.procedural import generate_source
+    from opend_mj.assets.procedural import write_source
 
     root = tmp_path_factory.mktemp("reliability")
-    sources = [generate_source(i, 0, root / "src") for i in (0, 1, 4)]
+    cabinets = sorted((DOORS, DRAWER, STACK), key=lambda c: c.index)
+    sources = [write_source(c, root / "src") for c in cabinets]
     manifest = build_dataset(sources, root / "cabinets", workers=1, progress=False, log=lambda *a: None)
-    assert [c["id"] for c in manifest.cabinets] == ["proc_0000", "proc_0001", "proc_0004"]
+    assert [c["id"] for c in manifest.cabinets] == [c.id for c in cabinets]
     return root / "cabinets"
 
 
@@ -92,7 +106,7 @@ def test_kill_9_then_resume(dataset, tmp_path):
     assert 1 <= len(before) < 6
     # and a torn line written by hand (as if killed in the middle of a write) is repaired too
     with open(out, "ab") as f:
-        f.write(b'{"cabinet": "proc_0004", "joint": "joint_0", "hand": "fr')
+        f.write(f'{{"cabinet": "{STACK.id}", "joint": "joint_0", "hand": "fr'.encode())
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert f"{6 - len(before)} episodes run, {len(before)} already done" in done.stdout
@@ -107,12 +121,12 @@ def test_kill_9_then_resume(dataset, tmp_path):
 def test_torn_line_repaired_on_resume(dataset, tmp_path):
     """A torn last line (no newline, half a JSON object) is cut away before new lines are appended."""
     out = tmp_path / "results.jsonl"
-    out.write_bytes(b'{"cabinet": "proc_0001", "joint": "joint_0", "ha')
+    out.write_bytes(f'{{"cabinet": "{DRAWER.id}", "joint": "joint_0", "ha'.encode())
     assert load_results(out, repair=False) == []
-    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=["proc_0001"])
+    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=[DRAWER.id])
     assert run_jobs(jobs, out, progress=False)["ran"] == 1
     recs = _lines(out)
-    assert len(recs) == 1 and recs[0]["cabinet"] == "proc_0001"
+    assert len(recs) == 1 and recs[0]["cabinet"] == DRAWER.id
 
 
 # --------------------------------------------------------------------------------------------------
@@ -120,8 +134,8 @@ def test_torn_line_repaired_on_resume(dataset, tmp_path):
 # --------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("broken_file", ["cabinet.xml", "cabinet.json", "meshes"])
 def test_corrupt_cabinet_is_reported_and_skipped(dataset, tmp_path, broken_file):
-    data = _subset(dataset, tmp_path / "cabinets", ["proc_0001", "proc_0004"])
-    bad = data / "proc_0004"
+    data = _subset(dataset, tmp_path / "cabinets", [DRAWER.id, STACK.id])
+    bad = data / STACK.id
     if broken_file == "meshes":  # well-formed XML naming missing files: found by the worker
         shutil.rmtree(bad / "meshes")
     else:  # truncated: found by the parent's check
@@ -134,24 +148,24 @@ def test_corrupt_cabinet_is_reported_and_skipped(dataset, tmp_path, broken_file)
     assert "4 episodes run, 0 already done, 3 errors, 1 successes" in result.output
     recs = _lines(out)
     errors = [r for r in recs if "error" in r]
-    assert {r["cabinet"] for r in errors} == {"proc_0004"} and len(errors) == 3
+    assert {r["cabinet"] for r in errors} == {STACK.id} and len(errors) == 3
     file_named = "cabinet.xml" if broken_file == "meshes" else broken_file
     for r in errors:
         assert r["success"] is False and r["error_kind"] == "cabinet"
-        assert "CabinetError" in r["error_reason"] and f"proc_0004/{file_named}" in r["error_reason"]
+        assert "CabinetError" in r["error_reason"] and f"{STACK.id}/{file_named}" in r["error_reason"]
     good = [r for r in recs if "error" not in r]
-    assert [r["cabinet"] for r in good] == ["proc_0001"] and good[0]["success"]
+    assert [r["cabinet"] for r in good] == [DRAWER.id] and good[0]["success"]
 
 
 def test_every_episode_an_error_exits_1(dataset, tmp_path):
-    data = _subset(dataset, tmp_path / "cabinets", ["proc_0001"])
-    (data / "proc_0001" / "cabinet.json").write_text("{")
+    data = _subset(dataset, tmp_path / "cabinets", [DRAWER.id])
+    (data / DRAWER.id / "cabinet.json").write_text("{")
     out = tmp_path / "results.jsonl"
     result = CliRunner().invoke(main, ["run", "--hand", HAND, "--split", "all", "--cabinets", str(data),
                                        "--out", str(out)])
     assert result.exit_code == 1, result.output
     assert "every episode failed" in result.output
-    assert "proc_0001/cabinet.json" in _lines(out)[0]["error_reason"]
+    assert f"{DRAWER.id}/cabinet.json" in _lines(out)[0]["error_reason"]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -170,7 +184,7 @@ def _env(cabinet_dir: Path, joint="joint_0"):
 
 def test_non_finite_action_raises_at_the_task_level(dataset):
     """Out-of-range actions are clipped (root to the workspace, fingers to ctrlrange); NaN/inf raise."""
-    env, action = _env(dataset / "proc_0004")
+    env, action = _env(dataset / STACK.id)
     for bad in (np.nan, np.inf):
         faulty = action.copy()
         faulty[0] = bad
@@ -199,7 +213,7 @@ def test_non_finite_action_is_an_error_record_and_the_run_goes_on(dataset, tmp_p
         return action
 
     monkeypatch.setattr(OpenCabinetTask, "make_action", faulty)
-    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=["proc_0004"])[:2]
+    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=[STACK.id])[:2]
     out = tmp_path / "results.jsonl"
     counts = run_jobs(jobs, out, workers=1, progress=False)
     assert counts["ran"] == 2 and counts["errors"] == 1
@@ -212,7 +226,7 @@ def test_non_finite_action_is_an_error_record_and_the_run_goes_on(dataset, tmp_p
 def test_physics_instability_is_recorded(dataset, tmp_path, monkeypatch):
     """Task level: a huge joint velocity raises BADQVEL, recorded in task.physics_warnings, episode over.
     Evaluation level: the episode's line has failed_stage "physics" and the warnings."""
-    env, action = _env(dataset / "proc_0004")
+    env, action = _env(dataset / STACK.id)
     physics = env.physics
     dof = physics.model.jnt_dofadr[physics.model.name2id("cabinet/joint_0", "joint")]
     physics.data.qvel[dof] = 1e12
@@ -233,7 +247,7 @@ def test_physics_instability_is_recorded(dataset, tmp_path, monkeypatch):
 
     monkeypatch.setattr(OpenCabinetTask, "before_step", kick)
     out = tmp_path / "results.jsonl"
-    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=["proc_0004"])[:1]
+    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=[STACK.id])[:1]
     assert run_jobs(jobs, out, workers=1, progress=False)["errors"] == 0
     (rec,) = _lines(out)
     assert rec["success"] is False and rec["failed_stage"] == "physics"
@@ -279,7 +293,7 @@ def test_bad_arguments_exit_2(args, message, dataset, tmp_path):
 def test_same_seed_same_file_whatever_the_workers(dataset, tmp_path):
     """Two episodes, twice with one worker and once with two: the same lines in the same (job) order,
     apart from the wall-clock fields."""
-    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=["proc_0001", "proc_0004"], seed=3)[:2]
+    jobs = make_jobs(dataset, [HAND], "oracle", split="all", cabinet_ids=[DRAWER.id, STACK.id], seed=3)[:2]
     files = []
     for k, workers in enumerate((1, 1, 2)):
         out = tmp_path / f"r{k}.jsonl"

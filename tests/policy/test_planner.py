@@ -8,15 +8,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-#: procedural cabinets (generator seed 0) as generator version 4 drew them: proc_0004 is a drawer
-#: stack, proc_0006 a double door (side-hinged; version 5 made it a pair of flaps)
-DRAWER = ("proc_0004", 4, "joint_0")
-DOOR = ("proc_0006", 6, "joint_0")
 
 
-def _v4(**changes):
-    """The generator configuration of version 4 (no flaps, long bars anywhere in range, bars 25 mm
-    from a door's free edge), with ``changes``."""
+def _first(where, config=None) -> tuple[str, int, str]:
+    """(id, index, "joint_0") of the first generated cabinet (seed 0) for which ``where`` holds."""
+    from opend_mj.assets.procedural import GeneratorConfig, find_cabinets
+
+    cabinet = find_cabinets(where, config=config or GeneratorConfig())[0]
+    return cabinet.id, cabinet.index, "joint_0"
+
+
+#: generated cabinets (seed 0, no flaps): a stack of three drawers, a side-hinged double door
+DRAWER = _first(lambda c: len(c.targets) == 3 and all(t.kind == "drawer" for t in c.targets))
+DOOR = _first(lambda c: len(c.targets) == 2 and all(t.kind == "door" and t.double for t in c.targets)
+              and {t.hinge for t in c.targets} == {"left", "right"})
+
+
+def _plain(**changes):
+    """A generator configuration without flaps, long bars anywhere in range and bars 25 mm from a
+    door's free edge, with ``changes``."""
     from opend_mj.assets.procedural import GeneratorConfig
 
     return GeneratorConfig(flap_share=0.0, long_bar_min_frac=0.0, door_bar_end_margin_range=(0.025, 0.025),
@@ -40,7 +50,7 @@ def planner_cabinets(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("planner_cabinets")
     out = {}
     for cid, index, _ in (DRAWER, DOOR):
-        src = generate_source(index, 0, root / "src", _v4())
+        src = generate_source(index, 0, root / "src")
         res = compile_cabinet(src, root / "built", cache_dir=root / "cache")
         assert (root / "built" / cid / "cabinet.json").is_file(), res
         out[cid] = root / "built" / cid
@@ -233,12 +243,12 @@ def test_door_pull_follows_the_circle_about_the_hinge_seen_in_depth():
 
 @pytest.mark.slow
 def test_regrasp_after_a_deliberate_miss_opens_the_drawer(planner_cabinets):
-    """The first grasp closes 6 cm above the handle (on air): the touch sensors say nothing is held,
+    """The first grasp closes 6 cm in front of the handle (on air): the touch sensors say nothing is held,
     the hand backs off, grasps again at the handle it saw, and opens the drawer."""
     from opend_mj.evaluation.runner import run_episode
 
     rec = run_episode(_job(planner_cabinets, DRAWER, "allegro",
-                           planner_overrides=(("approach.first_grasp_offset", (0.0, 0.0, 0.06)),)))
+                           planner_overrides=(("approach.first_grasp_offset", (-0.06, 0.0, 0.0)),)))
     assert "error" not in rec, rec.get("error")
     assert rec["regrasps"] >= 1
     assert rec["verify"][0]["held"] is False and any(v["held"] for v in rec["verify"][1:])
@@ -402,7 +412,7 @@ class _WrongKindFirst:
 
 @pytest.mark.slow
 def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_opened(tmp_path):
-    """proc_0067 holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names
+    """A cabinet holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names
     the right door's handle for "drawer": the Skeleton hand's pull sees the handle swing, takes it
     back, lets go, asks the solver again with what it saw, and opens the drawer. The door ends where
     it started (not opened). Then the reverse: the drawer's handle for "right door", seen sliding
@@ -413,15 +423,17 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     from opend_mj.evaluation.runner import run_episode
     from opend_mj.policy.solvers import register_solver
 
-    # generator version 3's proc_0067 (fronts inset above the floor, bars up to 17 mm), whose doors and
-    # drawer this scenario was written for
-    v3 = _v4(base_shares=(0.0, 1.0, 0.0, 0.0), bar_diameter_range=(0.005, 0.017))
-    src = generate_source(67, 0, tmp_path / "src", v3)
+    # a drawer (joint_0) over a side-hinged double door (joint_1, joint_2), fronts inset above the
+    # floor, bars up to 17 mm
+    config = _plain(base_shares=(0.0, 1.0, 0.0, 0.0), bar_diameter_range=(0.005, 0.017))
+    cid, index, _ = _first(lambda c: [t.kind for t in c.targets] == ["drawer", "door", "door"]
+                           and [t.hinge for t in c.targets[1:]] == ["left", "right"], config)
+    src = generate_source(index, 0, tmp_path / "src", config)
     compile_cabinet(src, tmp_path / "built", cache_dir=tmp_path / "cache")
-    cab = tmp_path / "built" / "proc_0067"
+    cab = tmp_path / "built" / cid
 
     def job(joint, solver):
-        return EpisodeJob(cabinet="proc_0067", cabinet_dir=str(cab), joint=joint, split="train", hand="skeleton",
+        return EpisodeJob(cabinet=cid, cabinet_dir=str(cab), joint=joint, split="train", hand="skeleton",
                           solver=solver, use_grasp_file=False)
 
     door = run_episode(job("joint_2", "oracle"))  # the door's handle box, in the same scene

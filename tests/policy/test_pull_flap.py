@@ -213,9 +213,17 @@ def test_a_flap_held_without_touch_is_seen_by_the_camera(sign, radius):
     assert _pull_loose_flap(sign, radius, PlannerConfig().override({"door.flap_pull": False}))[0] < 0.5
 
 
-#: procedural flaps (generator 5, seed 0): proc_0067 joint_2 hinged at its top, proc_0120 joint_0 at
-#: its bottom
-PROCEDURAL_FLAPS = [(67, "proc_0067", "joint_2"), (120, "proc_0120", "joint_0")]
+
+
+def _first_flap(hinge: str) -> tuple[int, str, str]:
+    """(index, id, joint) of the first generated flap (seed 0) hinged at its ``hinge`` edge."""
+    from opend_mj.assets.procedural import find_cabinets
+
+    (cabinet,) = find_cabinets(lambda c: any(t.hinge == hinge for t in c.targets))
+    return cabinet.index, cabinet.id, f"joint_{[t.hinge for t in cabinet.targets].index(hinge)}"
+
+
+PROCEDURAL_FLAPS = [_first_flap("top"), _first_flap("bottom")]
 
 
 @pytest.mark.slow

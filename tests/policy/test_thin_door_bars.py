@@ -9,18 +9,33 @@ from pathlib import Path
 
 import pytest
 
-#: generator 4, seed 0: proc_0226 is a double door with 9 mm horizontal bars 15 mm off the doors
-THIN_BAR_DOOR = ("proc_0226", 226, "joint_0")
+
+
+def _thin_bar_door() -> tuple[str, str, object]:
+    """(id, joint, sampled cabinet): the first generated double door (seed 0) with its bars in the lower half
+    of the cabinet, of a generator whose bars are 9 mm thick with 15 mm behind them, on doors horizontal."""
+    from opend_mj.assets.procedural import GeneratorConfig, find_cabinets
+
+    config = GeneratorConfig(bar_diameter_range=(0.009, 0.009), bar_gap_range=(0.015, 0.015),
+                             door_handle_kinds=(1.0, 0.0, 0.0), door_horizontal_share=1.0, flap_share=0.0,
+                             long_bar_share=0.0)
+    (cabinet,) = find_cabinets(lambda c: len(c.targets) == 2 and all(
+        t.kind == "door" and t.double and t.handle_orientation == "horizontal" and t.handle_center[1] < 0
+        for t in c.targets), config=config)
+    return cabinet.id, "joint_0", cabinet
+
+
+THIN_BAR_DOOR = _thin_bar_door()
 
 
 @pytest.fixture(scope="module")
 def thin_bar_cabinet(tmp_path_factory) -> Path:
     from opend_mj.assets.compiler import compile_cabinet
-    from opend_mj.assets.procedural import generate_source
+    from opend_mj.assets.procedural import write_source
 
     root = tmp_path_factory.mktemp("thin_bar")
-    cid, index, _ = THIN_BAR_DOOR
-    src = generate_source(index, 0, root / "src")
+    cid, _, cabinet = THIN_BAR_DOOR
+    src = write_source(cabinet, root / "src")
     res = compile_cabinet(src, root / "built", cache_dir=root / "cache")
     assert (root / "built" / cid / "cabinet.json").is_file(), res
     return root / "built" / cid
@@ -32,7 +47,7 @@ def test_a_thin_bar_close_to_its_door_is_held_and_the_door_opens(thin_bar_cabine
     from opend_mj.evaluation.episode import EpisodeJob
     from opend_mj.evaluation.runner import run_episode
 
-    cid, _, joint = THIN_BAR_DOOR
+    cid, joint, _ = THIN_BAR_DOOR
     rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(thin_bar_cabinet), joint=joint, split="test",
                                  hand=hand, solver="oracle"))
     assert "error" not in rec, rec.get("error")

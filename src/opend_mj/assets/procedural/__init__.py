@@ -31,10 +31,11 @@ from opend_mj.assets.layout import PARTNET_SCALE
 from opend_mj.assets.procedural.config import GENERATOR_VERSION, HANDLE_KINDS, GeneratorConfig
 from opend_mj.assets.procedural.model import SampledCabinet, sample_cabinet
 from opend_mj.assets.procedural.pieces import Box, Cylinder, piece_bounds, piece_mesh
-from opend_mj.assets.procedural.writer import describable, generate_source, generate_sources, write_source
+from opend_mj.assets.procedural.writer import (describable, find_cabinets, generate_source, generate_sources,
+                                               write_source)
 
 __all__ = [
     "GENERATOR_VERSION", "HANDLE_KINDS", "PARTNET_SCALE", "Box", "Cylinder", "GeneratorConfig", "SampledCabinet",
-    "describable", "generate_source", "generate_sources", "piece_bounds", "piece_mesh", "sample_cabinet",
+    "describable", "find_cabinets", "generate_source", "generate_sources", "piece_bounds", "piece_mesh", "sample_cabinet",
     "write_source",
 ]

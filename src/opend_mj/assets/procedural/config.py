@@ -9,7 +9,7 @@ from opend_mj.assets.layout import PARTNET_SCALE
 
 
 #: Bumped whenever the generated geometry changes.
-GENERATOR_VERSION = "5"
+GENERATOR_VERSION = "6"
 
 HANDLE_KINDS = ("bar", "arched", "knob")
 
@@ -69,7 +69,7 @@ class GeneratorConfig:
     #: (they drop down), each with a horizontal bar along its free edge. The real OpenD training
     #: cabinets: 18 of 144 doors in 10 cabinets, 8 hinged at the top and 10 at the bottom, opening
     #: 90-114 degrees, side by side in pairs in 4 of them. ``flap_share`` is the share of cabinets with
-    #: doors whose doors are all flaps; drawn from a random stream of its own (version 5).
+    #: doors whose doors are all flaps; drawn from a random stream of its own.
     flap_share: float = 0.25
     #: Doors taller than this (m) stay side-hinged (the real flaps are 0.25-0.91 m tall).
     flap_max_height: float = 0.95
@@ -84,16 +84,12 @@ class GeneratorConfig:
     #: the bottom panel, a low plinth in ``low_plinth_range``, a plinth or legs in ``plinth_range``).
     #: Matched to the real OpenD training cabinets' lowest moving part above the floor (the feasibility
     #: check's figure, 133 cabinets): 18 % within 5 mm, 16 % 0.5-5 cm, 4 % 5-10 cm, 62 % 10-22 cm.
-    #: Drawn from a random stream of its own (the draws before the layout are version 3's).
     base_shares: tuple[float, float, float, float] = (0.18, 0.16, 0.05, 0.61)
     low_plinth_range: tuple[float, float] = (0.03, 0.08)
     plinth_range: tuple[float, float] = (0.08, 0.18)
 
     # Probabilities of the sampled choices (each a share of cabinets, or of the targets or handles
     # named). Weights of a list need not sum to one: they are normalised where they are drawn.
-    #: Version 3's share of cabinets on a plinth: no longer decides the plinth (``base_shares`` does), but
-    #: its draw is kept so that the layout's random draws stay those of version 3.
-    plinth_share: float = 0.35
     #: Fronts painted like the carcass; interiors painted like it (else a light wood tone); handles
     #: in the front's colour (else a metal or plastic finish).
     front_matches_body_share: float = 0.7

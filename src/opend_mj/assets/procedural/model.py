@@ -47,7 +47,7 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
 
     ``floor_fronts``: the bottom row's doors and drawer fronts reach down to the floor (the bottom panel
     stands back behind them), as on many real cabinets without a plinth. ``doors_rng``: the random
-    stream of the doors' version 5 draws (flaps, where a bar ends); None draws neither (version 4)."""
+    stream of the doors' flaps and of where a door's bar ends; None: no flaps, bars end 25 mm short."""
     W, H, D = layout.width, layout.height, layout.depth
     g = cfg.clearance
     body = Material("body", colours["body"])
@@ -307,15 +307,23 @@ class SampledCabinet:
     targets: list[Target]
 
 
+#: The random stream ``(seed, index, n)`` each aspect of cabinet ``index`` draws from. Apart streams keep
+#: a change to how one aspect is drawn from moving the draws of every other aspect.
+STREAMS = {"layout": 1, "colours": 2, "parts": 3, "base": 4, "doors": 5}
+
+
 def sample_cabinet(index: int, seed: int, config: GeneratorConfig = GeneratorConfig()) -> SampledCabinet:
-    """Sample cabinet ``proc_<index>`` from the random stream ``(seed, index)`` (deterministic)."""
+    """Sample cabinet ``proc_<index>`` from the random streams ``(seed, index, STREAMS[...])`` (deterministic)."""
     cfg = config
-    rng = np.random.default_rng([seed, index])
+
+    def stream(aspect: str) -> np.random.Generator:
+        return np.random.default_rng([seed, index, STREAMS[aspect]])
+
+    rng = stream("layout")
     t = float(rng.uniform(*cfg.thickness_range))
-    if rng.random() < cfg.plinth_share:  # version 3 drew its plinth here: the draws stay, so that the
-        rng.uniform(0.05, 0.1)  # layout's draws start where they did; the base has a random stream of its own
-    base, plinth = draw_base(np.random.default_rng([seed, index, 4]), cfg)
+    base, plinth = draw_base(stream("base"), cfg)
     layout = sample_layout(rng, cfg, t, plinth)
+    rng = stream("colours")
     body = pick_colour(rng, cfg)
     front = body if rng.random() < cfg.front_matches_body_share else pick_colour(rng, cfg)
     interior = body if rng.random() < cfg.interior_matches_body_share else tuple(
@@ -327,7 +335,7 @@ def sample_cabinet(index: int, seed: int, config: GeneratorConfig = GeneratorCon
         finish = list(HANDLE_FINISHES)[rng.integers(len(HANDLE_FINISHES))]
         handle = HANDLE_FINISHES[finish]
     colours = {"body": body, "front": front, "interior": interior, "handle": handle}
-    carcass, targets = build_parts(rng, cfg, layout, t, plinth, colours, floor_fronts=base == "floor_fronts",
-                                   doors_rng=np.random.default_rng([seed, index, 5]))
+    carcass, targets = build_parts(stream("parts"), cfg, layout, t, plinth, colours,
+                                   floor_fronts=base == "floor_fronts", doors_rng=stream("doors"))
     return SampledCabinet(f"proc_{index:04d}", int(seed), int(index), t, plinth, base, layout, finish, carcass,
                           targets)

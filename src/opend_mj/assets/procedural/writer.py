@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -32,6 +33,28 @@ def describable(targets: list[tuple[str, float, float]], tol: float = 0.04, max_
     except LanguageInvalid:
         return False
     return True
+
+
+def _language_layout(cabinet: SampledCabinet) -> list[tuple[str, float, float]]:
+    """(type, handle height above the floor, handle horizontal position) of each target (m)."""
+    floor = -cabinet.layout.height / 2
+    return [(tg.kind, tg.handle_center[1] - floor, tg.handle_center[0]) for tg in cabinet.targets]
+
+
+def find_cabinets(where: Callable[[SampledCabinet], bool], count: int = 1, seed: int = 0,
+                  config: GeneratorConfig = GeneratorConfig(), stop: int = 2000) -> list[SampledCabinet]:
+    """The first ``count`` describable cabinets of ``seed`` (in index order, below ``stop``) for which
+    ``where`` holds: a cabinet picked by what it must be (a single door, a top-hinged flap) rather
+    than by an index that a new generator version gives to another cabinet. Fewer if there are none."""
+    found = []
+    for index in range(stop):
+        cabinet = sample_cabinet(index, seed, config)
+        if (describable(_language_layout(cabinet), config.level_tolerance, config.max_levels)
+                and where(cabinet)):
+            found.append(cabinet)
+            if len(found) == count:
+                break
+    return found
 
 
 def _fmt(v: float, decimals: int) -> str:
@@ -123,8 +146,7 @@ def write_source(cabinet: SampledCabinet, out_root: Path, config: GeneratorConfi
     files["mobility.urdf"] = "".join(xml).replace('xyz="0.000000 0.000000 0.000000"', 'xyz="0 0 0"')
     files["semantics.txt"] = "\n".join(sem) + "\n"
 
-    floor = -layout.height / 2
-    lang = [(tg.kind, tg.handle_center[1] - floor, tg.handle_center[0]) for tg in targets]
+    lang = _language_layout(cabinet)
     ok = describable(lang, cfg.level_tolerance, cfg.max_levels)
     meta = {
         "model_id": cabinet_id,
