@@ -413,7 +413,7 @@ class _WrongKindFirst:
 @pytest.mark.slow
 def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_opened(tmp_path):
     """A cabinet holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names
-    the right door's handle for "drawer": the Skeleton hand's pull sees the handle swing, takes it
+    the right door's handle for "drawer": the Shadow hand's pull sees the handle swing, takes it
     back, lets go, asks the solver again with what it saw, and opens the drawer. The door ends where
     it started (not opened). Then the reverse: the drawer's handle for "right door", seen sliding
     out by the camera."""
@@ -433,7 +433,7 @@ def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_ope
     cab = tmp_path / "built" / cid
 
     def job(joint, solver):
-        return EpisodeJob(cabinet=cid, cabinet_dir=str(cab), joint=joint, split="train", hand="skeleton",
+        return EpisodeJob(cabinet=cid, cabinet_dir=str(cab), joint=joint, split="train", hand="shadow",
                           solver=solver, use_grasp_file=False)
 
     door = run_episode(job("joint_2", "oracle"))  # the door's handle box, in the same scene
