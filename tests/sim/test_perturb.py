@@ -145,6 +145,13 @@ def test_depth_noise_and_instruction(proc_cabinets):
     env.reset()
     assert np.array_equal(env.task.sense_depth(rgb, depth), noisy)  # each episode: the same draws
     assert _env(cab).task.sense_depth(rgb, depth) is depth  # nominal: the rendered depth itself
+    assert _env(cab).task.sense_depth(rgb, depth, frames=8) is depth
+    # eight frames of the still scene, fused: about a third of one frame's noise, fewer holes
+    fused = _env(cab, "depth_noise=strong").task.sense_depth(rgb, depth, frames=8)
+    seen = depth > 0
+    both = seen & (noisy > 0) & (fused > 0)
+    assert np.median(np.abs(fused - depth)[both]) < 0.5 * np.median(np.abs(noisy - depth)[both])
+    assert (fused[seen] == 0).mean() < 0.5 * (noisy[seen] == 0).mean()
 
     from opend_mj.sim.cabinet import load_cabinet_info
 

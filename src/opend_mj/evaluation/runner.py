@@ -205,7 +205,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
     instruction = task.instruction
 
     rgb, depth = cam.render()  # the one observation
-    depth = task.sense_depth(rgb, depth)
+    depth = task.sense_depth(rgb, depth, frames=config.depth_frames)  # the scene is still: fused frames
     view = task.camera_view(physics)
     gt_box = task.handle_boxes(physics)[target.joint]
 
@@ -238,7 +238,7 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         if video:
             video.capture()
 
-    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: task.sense_depth(*cam.render()))
+    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: task.sense_depth(*cam.render(), frames=config.depth_frames))
     planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
                             overrides=job.planner_overrides,
                             ground_truth=lambda: task.handle_boxes(physics)[target.joint], on_stage=on_stage)

@@ -28,7 +28,7 @@ from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
 from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
-from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
+from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift, fuse_depth  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 from opend_mj.sim.success import Outcome, SuccessChecker  # noqa: E402,F401  (Outcome: part of this module's API)
@@ -44,6 +44,9 @@ class TaskConfig:
     time_limit: float = 15.0
     image_size: int = 256
     camera_fovy: float = 45.0
+    #: Depth frames fused into the image the planner perceives a still scene from (a 30 Hz sensor's
+    #: 8 frames: 0.27 s); one under exact depth, where every frame is the same
+    depth_frames: int = 8
     camera_shift: tuple[float, float, float] = (0.0, 0.0, 0.0)
     light_scale: float = 1.0
     success_threshold: float = 0.2
@@ -210,9 +213,12 @@ class OpenCabinetTask(composer.Task):
         self.shift.apply_model(physics, self.cabinet, self._handle_geoms)
         self._cache_state(physics)
 
-    def sense_depth(self, rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
-        """The depth image solvers and agents receive for a render (the sensor's, under depth_noise)."""
-        return depth if self.depth_sensor is None else self.depth_sensor(rgb, depth)
+    def sense_depth(self, rgb: np.ndarray, depth: np.ndarray, frames: int = 1) -> np.ndarray:
+        """The depth image solvers and agents receive for a render (the sensor's, under depth_noise);
+        ``frames`` > 1: that many sensor frames of the still scene, fused (`perturb.fuse_depth`)."""
+        if self.depth_sensor is None:
+            return depth
+        return fuse_depth([self.depth_sensor(rgb, depth) for _ in range(max(1, frames))])
 
     def _add_observables(self) -> None:
         size = self.config.image_size

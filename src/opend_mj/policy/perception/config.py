@@ -29,6 +29,13 @@ class PerceptionConfig:
     #: the handle's front: this percentile of the world x of the box's pixels (the nearest few per
     #: cent: robust to a stray pixel); the panel behind it (a loose box): this percentile
     front_percentile: float = 3.0
+    #: depth noise (m, `noise.pixel_noise` around the box) below this is none: exact depth reads
+    #: exactly as it did. Above it, the front percentile is
+    #: moved back by ``front_noise_shift`` sigmas (a normal's 3rd percentile lies 1.88 sigma below its
+    #: mean) and the bar takes ``bar_noise_depth`` sigmas more behind the front
+    noise_floor: float = 0.001
+    front_noise_shift: float = 1.88
+    bar_noise_depth: float = 2.0
     panel_percentile: float = 95.0
     #: largest half-thickness of a bar: the grip centre is the front seen in depth plus this (m)
     handle_radius: float = 0.007

@@ -12,6 +12,7 @@ import numpy as np
 
 from opend_mj.policy.handle import HandleBox
 from opend_mj.policy.perception.config import PerceptionConfig
+from opend_mj.policy.perception.noise import pixel_noise
 
 
 @dataclass
@@ -24,6 +25,7 @@ class HandleEstimate:
     size: tuple[float, float]  # world extent along y and z (m)
     front_x: float  # world x of the handle's front (nearest to the camera)
     panel_x: float  # world x of the panel the handle stands on
+    noise: float = 0.0  # depth noise seen around the handle (m, sigma; 0 below PerceptionConfig.noise_floor)
 
     def to_dict(self) -> dict:
         return {"centre": [round(float(x), 4) for x in self.centre], "orientation": self.orientation,
@@ -63,7 +65,7 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
     panel_x = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, config)
     panel_x = max(panel_x if panel_x is not None else handle.panel_x, handle.front_x)
     # the bar: pixels in the box within a few mm of the handle's front
-    bar = in_box & (x < handle.front_x + config.bar_depth)
+    bar = in_box & (x < handle.front_x + config.bar_depth + config.bar_noise_depth * handle.noise)
     m_per_px = 1.0 / px_per_m
     if bar.sum() >= 2:
         # extents in pixels (rows / columns covered), then metres: area / length for the thickness
@@ -264,6 +266,8 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view,
     pts = view.backproject(uu[ok], vv[ok], d[ok])
     xs = pts[:, 0]
     front_x = float(np.percentile(xs, config.front_percentile))
+    noise = _depth_noise(box, depth, view, front_x, config)
+    front_x += config.front_noise_shift * noise
     panel_x = float(np.percentile(xs, config.panel_percentile))
     uc, vc = box.centre
     around = _panel_behind_tight_box(box, depth, view, xs, front_x, config)
@@ -282,7 +286,14 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view,
         orientation = "horizontal" if size_y >= size_z else "vertical"
     kind = "knob" if (long_ / short < config.knob_aspect and long_ < config.knob_size) else "bar"
     return HandleEstimate(centre=centre, orientation=orientation, kind=kind, size=(size_y, size_z),
-                          front_x=front_x, panel_x=panel_x)
+                          front_x=front_x, panel_x=panel_x, noise=noise)
+
+
+def _depth_noise(box: HandleBox, depth: np.ndarray, view, front_x: float, config: PerceptionConfig) -> float:
+    """The depth noise (m) in the box and the band around it (`noise.pixel_noise`)."""
+    px_per_m = _px_per_m(view, *box.centre, front_x)
+    _, _, ok, pts, _ = _window(box, depth, view, int(math.ceil(config.panel_band * px_per_m)) + 1, config)
+    return pixel_noise(pts[..., 0], ok, config.noise_floor)
 
 
 def _panel_behind_tight_box(box: HandleBox, depth: np.ndarray, view, xs: np.ndarray, front_x: float,

@@ -4,9 +4,11 @@ exactly)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from opend_mj.policy.perception.noise import pixel_noise
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,12 @@ class ProposalConfig:
     #: raised panel's frame (an L) about half. 0: off.
     min_fill: float = 0.6
     square_aspect: float = 2.0
+    #: Noisy depth (`noise.pixel_noise` over ``front_window``, at least ``noise_floor`` m): a pixel is proud
+    #: only ``noise_sigmas`` sigmas nearer than its panel or more, and a group holds ``noise_min_pixels``
+    #: or more, else noise alone forms groups.
+    noise_floor: float = 0.001
+    noise_sigmas: float = 3.0
+    noise_min_pixels: int = 6
 
 
 def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalConfig()) -> list[tuple]:
@@ -68,6 +76,12 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
     d = np.where(np.isfinite(depth), depth, np.nanmax(depth[np.isfinite(depth)]) if np.isfinite(depth).any() else 0.0)
     pts = view.backproject(uu.ravel(), vv.ravel(), d.ravel()).reshape(h, w, 3)
     x = pts[..., 0]
+    r0, r1, c0, c1 = config.front_window  # the noise where the camera frames the cabinet
+    rows, cols = slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1))
+    sigma = pixel_noise(x[rows, cols], (np.isfinite(depth) & (depth > 0))[rows, cols], config.noise_floor)
+    if sigma > 0:
+        config = replace(config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * sigma),
+                         min_pixels=max(config.min_pixels, config.noise_min_pixels))
     # the panel: a median over the window, taken on a grid of every ``stride``-th pixel (25 x 25
     # medians at every pixel cost ~1 s an image; on the grid 1/16 of it) and spread back
     s = max(1, int(config.stride))
@@ -151,8 +165,6 @@ def thin_proposals(depth: np.ndarray, view, main: list, config: ThinProposalConf
     """The groups (box, mask) standing ``config.min_protrusion`` proud that ``handle_proposals``
     (``main``, its (box, mask) list) misses: none of ``main`` and none of these holds the other's
     centre. Empty when ``config.min_protrusion`` is 0."""
-    from dataclasses import replace
-
     from opend_mj.policy.handle import centres_overlap
 
     if config.min_protrusion <= 0:

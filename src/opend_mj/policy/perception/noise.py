@@ -1,0 +1,23 @@
+"""How noisy a depth image is, read from the image itself: perception allows for it where a
+threshold in millimetres would otherwise meet noise of the same size (a real sensor's, or
+`sim.perturb`'s depth_noise)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def pixel_noise(x: np.ndarray, ok: np.ndarray, floor: float) -> float:
+    """The noise (m, one sigma) of a grid of world coordinates ``x`` (valid where ``ok``): the robust
+    spread, 1.4826 MAD / sqrt(6), of the second differences along rows (x[u+1] - 2 x[u] + x[u-1]).
+    A surface, flat or sloped, gives second differences of about 0 and an edge moves few of them;
+    noise moves them all. 0 below ``floor`` (exact depth) or where fewer than 16 triples are valid."""
+    triple = ok[:, 2:] & ok[:, 1:-1] & ok[:, :-2]
+    if triple.sum() < 16:
+        return 0.0
+    second = (x[:, 2:] - 2.0 * x[:, 1:-1] + x[:, :-2])[triple]
+    sigma = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6.0)
+    return sigma if sigma >= floor else 0.0
+
