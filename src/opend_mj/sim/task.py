@@ -44,8 +44,8 @@ class TaskConfig:
     time_limit: float = 15.0
     image_size: int = 256
     camera_fovy: float = 45.0
-    #: Depth frames fused into the image the planner perceives a still scene from (a 30 Hz sensor's
-    #: 8 frames: 0.27 s); one under exact depth, where every frame is the same
+    #: Depth frames fused into the image the planner perceives the still scene from before it moves (a
+    #: 30 Hz sensor's 8 frames: 0.27 s); its looks while the hand moves are one frame each
     depth_frames: int = 8
     camera_shift: tuple[float, float, float] = (0.0, 0.0, 0.0)
     light_scale: float = 1.0
