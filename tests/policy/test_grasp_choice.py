@@ -356,6 +356,7 @@ def test_a_bar_is_measured_through_depth_noise():
     assert handle.noise == 0.0 and shape.gap == pytest.approx(0.025, abs=0.004)
     handle, shape = measure(noisy)
     assert handle.noise == pytest.approx(0.003, rel=0.3)
-    assert shape.thickness == pytest.approx(0.014, abs=0.005) and shape.gap == pytest.approx(0.025, abs=0.006), shape
+    assert shape.thickness == pytest.approx(0.014, abs=0.005), shape
+    assert shape.gap == pytest.approx(0.025, abs=0.006), shape
     _, blind = measure(noisy, replace(PerceptionConfig(), noise_floor=1.0))  # noise taken for none
     assert blind.gap > 0.035, blind

@@ -18,7 +18,7 @@ def _first(where, config=None) -> tuple[str, int, str]:
     return cabinet.id, cabinet.index, "joint_0"
 
 
-#: generated cabinets (seed 0, no flaps): a stack of three drawers, a side-hinged double door
+#: generated cabinets (seed 0): a stack of three drawers, a side-hinged double door
 DRAWER = _first(lambda c: len(c.targets) == 3 and all(t.kind == "drawer" for t in c.targets))
 DOOR = _first(lambda c: len(c.targets) == 2 and all(t.kind == "door" and t.double for t in c.targets)
               and {t.hinge for t in c.targets} == {"left", "right"})

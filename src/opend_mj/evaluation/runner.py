@@ -238,7 +238,8 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         if video:
             video.capture()
 
-    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: task.sense_depth(*cam.render()))  # mid-motion: one frame
+    # a look while the hand moves is one frame (fusing frames would blur a moving front)
+    robot = Robot(_StopAtLast(env), on_step=on_step, look=lambda: task.sense_depth(*cam.render()))
     planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
                             overrides=job.planner_overrides,
                             ground_truth=lambda: task.handle_boxes(physics)[target.joint], on_stage=on_stage)

@@ -36,6 +36,6 @@ from opend_mj.assets.procedural.writer import (describable, find_cabinets, gener
 
 __all__ = [
     "GENERATOR_VERSION", "HANDLE_KINDS", "PARTNET_SCALE", "Box", "Cylinder", "GeneratorConfig", "SampledCabinet",
-    "describable", "find_cabinets", "generate_source", "generate_sources", "piece_bounds", "piece_mesh", "sample_cabinet",
-    "write_source",
+    "describable", "find_cabinets", "generate_source", "generate_sources", "piece_bounds", "piece_mesh",
+    "sample_cabinet", "write_source",
 ]

@@ -30,9 +30,9 @@ class PerceptionConfig:
     #: cent: robust to a stray pixel); the panel behind it (a loose box): this percentile
     front_percentile: float = 3.0
     #: depth noise (m, `noise.pixel_noise` around the box) below this is none: exact depth reads
-    #: exactly as it did. Above it, the front percentile is
-    #: moved back by ``front_noise_shift`` sigmas (a normal's 3rd percentile lies 1.88 sigma below its
-    #: mean) and the bar takes ``bar_noise_depth`` sigmas more behind the front
+    #: exactly as it did. Above it, the front percentile is moved back by ``front_noise_shift`` sigmas
+    #: (a normal's 3rd percentile lies 1.88 sigma below its mean) and the bar takes ``bar_noise_depth``
+    #: sigmas more behind the front
     noise_floor: float = 0.001
     front_noise_shift: float = 1.88
     bar_noise_depth: float = 2.0

@@ -20,4 +20,3 @@ def pixel_noise(x: np.ndarray, ok: np.ndarray, floor: float) -> float:
     second = (x[:, 2:] - 2.0 * x[:, 1:-1] + x[:, :-2])[triple]
     sigma = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6.0)
     return sigma if sigma >= floor else 0.0
-

@@ -78,7 +78,8 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
     x = pts[..., 0]
     r0, r1, c0, c1 = config.front_window  # the noise where the camera frames the cabinet
     rows, cols = slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1))
-    sigma = pixel_noise(x[rows, cols], (np.isfinite(depth) & (depth > 0))[rows, cols], config.noise_floor)
+    window = depth[rows, cols]
+    sigma = pixel_noise(x[rows, cols], np.isfinite(window) & (window > 0), config.noise_floor)
     if sigma > 0:
         config = replace(config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * sigma),
                          min_pixels=max(config.min_pixels, config.noise_min_pixels))
