@@ -40,6 +40,7 @@ COMMANDS: dict[str, str] = {
     "demos": "opend_mj.commands.demos:demos",
     "train-policy": "opend_mj.commands.demos:train_policy",
     "bundle-policy": "opend_mj.commands.demos:bundle_policy",
+    "expert-check": "opend_mj.commands.demos:expert_check",
 }
 
 

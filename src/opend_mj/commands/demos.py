@@ -139,3 +139,46 @@ def bundle_policy(checkpoints, out, ensemble_decay, routes):
                f"{summary['ensemble_decay']:g}, stop {summary['stop_time']:.2f} s -> {out}")
     for kind, route in summary.get("routes", {}).items():
         click.echo(f"  {kind}: members {route['members']}, stop {route['stop_time']:.2f} s")
+
+
+@click.command("expert-check")
+@click.option("--hand", "hands", multiple=True, default=("allegro",), show_default=True, callback=_check_hands,
+              help="Hand name (repeat for several).")
+@click.option("--lead", default="planner", show_default=True,
+              help="Who acts before the switch: 'planner' (the planner itself) or an agent of `opend run --policy` (bc).")
+@click.option("--lead-arg", "lead_args", multiple=True, help="key=value for the lead agent's constructor (repeatable).")
+@click.option("--switch", "switches", multiple=True, type=click.FloatRange(min=0), default=(2.0, 4.0, 6.0),
+              show_default=True, help="Seconds of simulated time after which the expert takes over (repeatable).")
+@click.option("--split", type=click.Choice(["train", "test", "all"]), default="test", show_default=True)
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, callback=_check_cabinets)
+@click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="JSON lines, one per takeover; appended to, resumable [results/expert/<lead>_<hand>_<split>.jsonl].")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--progress/--no-progress", default=True)
+def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, out, workers, progress):
+    """The planner as an interactive expert, taking over episodes mid-way from a lead: what it opens."""
+    import json
+
+    from opend_mj.evaluation.agents import parse_policy_args
+    from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.evaluation.takeover import check_expert, summarise_takeovers
+
+    jobs = make_jobs(cabinets_dir, hands, "oracle", split=split, limit=limit)
+    if not jobs:
+        raise click.ClickException(f"no episodes: split {split!r} of {cabinets_dir} has no targets")
+    if out is None:
+        out = Path("results/expert") / f"{lead.replace(':', '_').replace('/', '_')}_{'_'.join(hands)}_{split}.jsonl"
+    try:
+        args = parse_policy_args(lead_args)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--lead-arg") from None
+    counts = check_expert(jobs, out, lead=lead, lead_args=args, switches=switches, workers=workers, progress=progress)
+    records = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+    keys = {(j.cabinet, j.joint, j.hand, j.seed) for j in jobs}
+    records = [r for r in records if (r["cabinet"], r["joint"], r["hand"], r["seed"]) in keys]
+    click.echo(f"{out}: ran {counts['ran']}, errors {counts['errors']}")
+    for (who, switch), (s, n) in sorted(summarise_takeovers(records).items(), key=lambda kv: str(kv[0])):
+        at = "all switches" if switch == "all" else f"switch {switch:g} s"
+        click.echo(f"  {who}, {at}: {s}/{n} = {100.0 * s / max(n, 1):.1f} % opened")

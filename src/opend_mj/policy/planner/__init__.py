@@ -46,6 +46,7 @@ from opend_mj.policy.planner.records import (
     EpisodeState,
     GraspChoice,
     Observation,
+    PartMotion,
     PlanResult,
     PullState,
 )
@@ -58,7 +59,7 @@ from opend_mj.sim.hands import GRASP_FILE, PLANNER_FILE, GraspProfile, HandPlann
 __all__ = [
     "GRASP_FILE", "PLANNER_FILE", "STAGES", "Approach", "ApproachConfig", "DoorConfig", "EpisodeState",
     "FlapSteering", "FrontWatch", "GraspChoice", "GraspConfig", "GraspProfile", "Grasping", "HandPlannerConfig",
-    "KindCheck", "KindConfig", "LocateConfig", "Observation", "PanelSliding", "PlanResult", "Planner",
+    "KindCheck", "KindConfig", "LocateConfig", "Observation", "PanelSliding", "PartMotion", "PlanResult", "Planner",
     "PlannerConfig", "PullConfig", "PullState", "Pulling", "PushRecovery", "RecoveryConfig", "Robot", "Stage",
     "StageContext", "VerifyConfig", "fit_circle_xy",
 ]

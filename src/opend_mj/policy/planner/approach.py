@@ -27,9 +27,24 @@ class Approach(Stage):
         parts = [k for k, v in touch.items() if v > cfg.touch_min and k not in cfg.load_excludes]
         return len(parts) >= self.hand.hold_parts, touch
 
-    def approach(self, robot, g: GraspChoice, result: PlanResult, first: bool = True) -> float:
+    def holds(self, robot, g: GraspChoice) -> bool:
+        """Whether the hand holds the handle as ``g`` would: touch says it holds (:meth:`holding`)
+        and its fingers are at least half way from ``g``'s open pose to its closed one (a hand that
+        only leans on the handle, fingers open, does not)."""
+        if not self.holding(robot)[0]:
+            return False
+        span = np.asarray(g.closed, float) - np.asarray(g.pre, float)
+        moving = np.abs(span) > 1e-3
+        if not moving.any():
+            return True
+        share = (np.asarray(robot.finger_qpos(), float) - g.pre)[moving] / span[moving]
+        return float(np.mean(share)) >= 0.5
+
+    def approach(self, robot, g: GraspChoice, result: PlanResult, first: bool = True, from_here: bool = False) -> float:
         """Open hand to the pre-grasp in front of the handle (along the approach axis), then in;
-        returns how far (m) the site ended from its target."""
+        returns how far (m) the site ended from its target. ``from_here``: an episode taken over
+        mid-way: no wait before the move, and a hand nearer the cabinet than the pre-grasp first
+        backs straight out to it (it may be in front of the handle, or on it with its fingers open)."""
         cfg = self.config.approach
         target = g.pos.copy()
         if first and cfg.first_grasp_offset is not None:  # a deliberate miss (tests)
@@ -38,7 +53,14 @@ class Approach(Stage):
         pre_pos = target - cfg.pregrasp_distance * axis
         self.ctx.enter(result, "approach", site_target=target.tolist(), attempt=g.attempt)
         site0, _ = robot.site_pose()
-        hold(robot, site0, g.quat, g.pre, cfg.first_wait if first else cfg.again_wait)
+        if from_here:
+            ahead = float((site0 - pre_pos) @ axis)
+            if ahead > 0.0:
+                out = site0 - ahead * axis
+                move(robot, site0, out, g.quat, g.pre, cfg.move_speed)
+                site0 = out
+        else:
+            hold(robot, site0, g.quat, g.pre, cfg.first_wait if first else cfg.again_wait)
         if first:  # move at the start depth, then to the pre-grasp
             waypoint = np.array([min(site0[0], pre_pos[0]), pre_pos[1], pre_pos[2]])
             move(robot, site0, waypoint, g.quat, g.pre, cfg.move_speed)

@@ -8,6 +8,8 @@ import math
 from dataclasses import replace
 from typing import Callable
 
+import numpy as np
+
 from opend_mj.language import InstructionNotUnderstood, target_kind
 from opend_mj.policy.handle import HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
@@ -26,7 +28,9 @@ from opend_mj.policy.planner.moves import hold, move
 from opend_mj.policy.planner.pull import Pulling
 from opend_mj.policy.planner.records import (
     EpisodeState,
+    GraspChoice,
     Observation,
+    PartMotion,
     PlanResult,
     PullState,
 )
@@ -141,8 +145,14 @@ class Planner(Stage):
             robot.step(pos, quat, fingers)
 
     # ---------------------------------------------------------------- the episode
-    def run(self, robot, obs: Observation) -> PlanResult:
-        """One episode from its one observation: open the handle the instruction names."""
+    def run(self, robot, obs: Observation, motion: PartMotion | None = None) -> PlanResult:
+        """One episode from its one observation: open the handle the instruction names.
+
+        ``motion``: an episode taken over mid-way (the planner as an interactive expert,
+        :mod:`opend_mj.policy.expert`): ``obs`` is still the episode's first image, the hand is
+        wherever another agent left it, and the instructed part has moved by ``motion`` since that
+        image. The grasp chosen in the image moves with its part; a hand that already holds the
+        handle goes on pulling it, any other approaches it from where it is."""
         cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         self.state = EpisodeState(first=obs)  # the image a pulled front's motion is measured against
@@ -160,7 +170,8 @@ class Planner(Stage):
             self._hold_until_min_time(robot, None)
             return result
         while True:
-            status, state, grasp = self.open_handle(robot, obs, handle, box, result)
+            status, state, grasp = self.open_handle(robot, obs, handle, box, result, motion)
+            motion = None  # a handle asked for again is approached as at an episode's start
             if status != "wrong_kind":
                 break
             # the handle moved as the other kind: push it back, let go, ask the solver again
@@ -212,16 +223,19 @@ class Planner(Stage):
         if depth is not None:
             self.state.first = replace(obs, depth=depth)
 
-    def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult):
+    def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult, motion: PartMotion | None = None):
         """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
         pull state, last grasp); status "done", "slipped", "not_held" or "wrong_kind" (its motion
-        showed the other kind than the instruction's)."""
+        showed the other kind than the instruction's). ``motion``: see :meth:`run`."""
         cfg = self.config
         self.state.handle = handle
         shape = self.perceive(handle, box, obs, result)
         grasp = self.grasping.choose_grasp(handle, shape, obs, result)
         door = result.target_kind == "door" and cfg.pull == "arc"
         state = PullState(quat0=grasp.quat)
+        held = False
+        if motion is not None:
+            grasp, held = self._taken_over(robot, grasp, motion, state, result)
         status = "not_held"
         for attempt in range(cfg.recovery.max_grasp_tries):
             if attempt > 0 and self._time_left(robot) < cfg.recovery.attempt_time:
@@ -229,12 +243,14 @@ class Planner(Stage):
             grasp.attempt = attempt
             if attempt > 0:
                 result.regrasps += 1
-            self.approach.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind)
-            if not self.approach.close_and_verify(robot, grasp, result):
-                status = "not_held"
-                self.approach.back_off(robot, grasp)
-                grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
-                continue
+            if not (attempt == 0 and held):  # (a hand taken over on the handle pulls on)
+                self.approach.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind,
+                                       from_here=attempt == 0 and motion is not None)
+                if not self.approach.close_and_verify(robot, grasp, result):
+                    status = "not_held"
+                    self.approach.back_off(robot, grasp)
+                    grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
+                    continue
             status = self.pulling.pull(robot, grasp, door, state, result)
             if status == "wrong_kind":
                 return status, state, grasp
@@ -257,6 +273,27 @@ class Planner(Stage):
         if door and status != "done" and cfg.recovery.push_recovery:
             self.recovery.recover_door(robot, state, result)
         return status, state, grasp
+
+    def _taken_over(self, robot, grasp: GraspChoice, motion: PartMotion, state: PullState, result: PlanResult):
+        """An episode taken over mid-way: the grasp chosen in the first image moved with its part
+        (``motion``), the pull's travel so far (m) taken from the part's slide or the grasp point's
+        path, and whether the hand already holds the handle (:meth:`Approach.holds`). Returns
+        (the moved grasp, held)."""
+        pos = motion.point(grasp.pos)
+        moved = replace(grasp, pos=pos, quat=motion.orientation(grasp.quat),
+                        probe=None if grasp.probe is None else motion.rot @ np.asarray(grasp.probe, float))
+        state.travelled = float(np.linalg.norm(pos - grasp.pos))
+        out = motion.rot @ state.base_dir
+        out[2] = 0.0
+        if result.target_kind == "door" and np.linalg.norm(out) > 1e-6:  # a door: the pull goes on along its turn
+            out = out / np.linalg.norm(out)
+            b = state.base_dir
+            state.direction = out
+            state.turned = state.peak_turn = math.degrees(math.atan2(b[0] * out[1] - b[1] * out[0], float(b @ out)))
+        held = self.approach.holds(robot, moved)
+        result.events.append({"taken_over": {"turned_deg": round(motion.angle_deg, 1),
+                                             "slid": round(motion.distance, 4), "held": held}})
+        return moved, held
 
     def locate(self, robot, obs: Observation, result: PlanResult, observed: tuple = ()):
         """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle;

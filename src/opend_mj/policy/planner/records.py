@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from opend_mj.transforms import quat_axis_z
+from opend_mj.transforms import mat_to_quat, quat_axis_z, quat_mul
 
 #: The stages an episode goes through (``PlanResult.stage_reached``; "check" ends every episode).
 STAGES = ("locate", "approach", "grasp", "pull", "recover")
@@ -152,3 +152,34 @@ class EpisodeState:
     hinge: np.ndarray | None = None
     first_pos: np.ndarray | None = None
     approach_target: np.ndarray | None = None
+
+
+@dataclass
+class PartMotion:
+    """How the instructed part moved since the first image, as a rigid motion of the world: a turn
+    ``rot`` (3 x 3) about ``pivot`` (world, m), then a shift ``shift`` (m). An episode taken over
+    mid-way (:meth:`~opend_mj.policy.planner.Planner.run` with ``motion``) moves the grasp chosen in
+    the first image with its part: a drawer pulled out, a door turned about its hinge."""
+
+    rot: np.ndarray = field(default_factory=lambda: np.eye(3))
+    pivot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def point(self, p) -> np.ndarray:
+        """Where a point of the part at ``p`` (world, m) in the first image is now."""
+        return self.pivot + self.rot @ (np.asarray(p, float) - self.pivot) + self.shift
+
+    def orientation(self, quat) -> np.ndarray:
+        """An orientation (w, x, y, z) fixed to the part in the first image, now."""
+        q = quat_mul(mat_to_quat(self.rot), np.asarray(quat, float))
+        return q / np.linalg.norm(q)
+
+    @property
+    def angle_deg(self) -> float:
+        """How far the part turned (deg)."""
+        return float(np.degrees(np.arccos(np.clip((np.trace(self.rot) - 1.0) / 2.0, -1.0, 1.0))))
+
+    @property
+    def distance(self) -> float:
+        """How far the part slid (m)."""
+        return float(np.linalg.norm(self.shift))
