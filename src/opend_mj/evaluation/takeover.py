@@ -109,6 +109,7 @@ def takeover_episode(job: EpisodeJob, lead, switch: float, env=None, expert_conf
         "open_ratio": float(outcome.open_ratio), "range_ratio": float(outcome.range_ratio),
         "switch_open_ratio": round(float(at.open_ratio), 4), "switch_range_ratio": round(float(at.range_ratio), 4),
         "lead_stage": lead_stage,
+        "taken_over": None if expert is None else expert.taken_over,
         "restarts": 0 if expert is None else expert.restarts,
         "unlabelled": 0 if expert is None else expert.unlabelled,
         "why": None if expert is None else expert.why,

@@ -81,9 +81,11 @@ def part_motion(task, physics) -> PartMotion:
     delta = float(bound.qpos[0]) - float(target.closed)
     axis = np.array(bound.xaxis, float)
     axis = axis / max(1e-12, float(np.linalg.norm(axis)))
+    share = float(target.range_ratio(float(bound.qpos[0])))
     if int(physics.model.jnt_type[int(bound.element_id)]) == 3:  # mjJNT_HINGE
-        return PartMotion(rot=quat_to_mat(axis_angle_quat(axis, delta)), pivot=np.array(bound.xanchor, float))
-    return PartMotion(shift=axis * delta)
+        return PartMotion(rot=quat_to_mat(axis_angle_quat(axis, delta)), pivot=np.array(bound.xanchor, float),
+                          share=share)
+    return PartMotion(shift=axis * delta, share=share)
 
 
 class PlannerExpert:
@@ -94,7 +96,9 @@ class PlannerExpert:
     before any part moved); ``camera``: the episode's :class:`~opend_mj.sim.camera.RGBDCamera`
     (the planner's looks while the hand moves). Call :meth:`action` once per control step, before
     the step; :meth:`close` at the end. ``restarts``: how many times the plan started again from
-    the state as it was; ``unlabelled``: steps answered with None."""
+    the state as it was; ``unlabelled``: steps answered with None; ``taken_over``: how the first
+    plan started mid-way found the part and the hand (:attr:`EpisodeState.taken_over`), None where
+    the expert began with the episode."""
 
     def __init__(self, env, first: Observation, camera, config: ExpertConfig = ExpertConfig(), hand=None):
         self.env = env
@@ -107,6 +111,7 @@ class PlannerExpert:
         self.result = None  # the PlanResult of the plan that ran last to its end
         self.restarts = 0
         self.unlabelled = 0
+        self.taken_over: dict | None = None  # the first plan's view of the state it took over
         self.stage = ""
         self._thread = None
         self._waiting = False  # the plan waits for the scene to be stepped
@@ -242,6 +247,8 @@ class PlannerExpert:
             label = self._next()
         if label is None:
             return self._none("finished")
+        if self.taken_over is None and self._planner.state.taken_over is not None:
+            self.taken_over = dict(self._planner.state.taken_over)
         self.why = None
         return label[0]
 

@@ -27,11 +27,13 @@ class Approach(Stage):
         parts = [k for k, v in touch.items() if v > cfg.touch_min and k not in cfg.load_excludes]
         return len(parts) >= self.hand.hold_parts, touch
 
-    def holds(self, robot, g: GraspChoice) -> bool:
-        """Whether the hand holds the handle as ``g`` would: touch says it holds (:meth:`holding`)
-        and its fingers are at least half way from ``g``'s open pose to its closed one (a hand that
-        only leans on the handle, fingers open, does not)."""
-        if not self.holding(robot)[0]:
+    def holds(self, robot, g: GraspChoice, reach: float = 0.03) -> bool:
+        """Whether the hand holds the handle as ``g`` would: its fingers at least half way from
+        ``g``'s open pose to its closed one (a hand that only leans on the handle, fingers open, does
+        not), and touch says it holds (:meth:`holding`) or the grasp site is within ``reach`` (m) of
+        ``g``'s (contacts on a held bar come and go from step to step)."""
+        near = float(np.linalg.norm(robot.site_pos() - g.pos)) <= reach
+        if not (near or self.holding(robot)[0]):
             return False
         span = np.asarray(g.closed, float) - np.asarray(g.pre, float)
         moving = np.abs(span) > 1e-3

@@ -46,6 +46,8 @@ from opend_mj.transforms import quat_axis_z
 RELEASE_HOLD = 0.2
 RELEASE_OPEN = 0.4
 RELEASE_BACKOFF = 0.08
+#: An episode taken over with its part open this share of its range or more is done (nothing to pull).
+TAKEN_OVER_OPEN = 0.9
 #: A grip never held beyond this much pull travel (m) is the grasp's failure, not the pull's.
 GRASP_FAILED_TRAVEL = 0.03
 
@@ -235,7 +237,15 @@ class Planner(Stage):
         state = PullState(quat0=grasp.quat)
         held = False
         if motion is not None:
+            start = grasp.pos
             grasp, held = self._taken_over(robot, grasp, motion, state, result)
+            if not held and ((motion.angle_deg >= cfg.pulling.door_done_deg if door
+                              else state.travelled >= cfg.pulling.drawer_done)
+                             or (motion.share is not None and motion.share >= TAKEN_OVER_OPEN)):
+                return "done", state, grasp  # the part is as open as a finished pull leaves it
+            if door and not held and cfg.recovery.push_recovery and self._door_turned(motion, start, state) \
+                    and self.recovery.recover_door(robot, state, result):
+                return "not_held", state, grasp  # a door left ajar is pushed open from inside, as a lost one
         status = "not_held"
         for attempt in range(cfg.recovery.max_grasp_tries):
             if attempt > 0 and self._time_left(robot) < cfg.recovery.attempt_time:
@@ -291,9 +301,26 @@ class Planner(Stage):
             state.direction = out
             state.turned = state.peak_turn = math.degrees(math.atan2(b[0] * out[1] - b[1] * out[0], float(b @ out)))
         held = self.approach.holds(robot, moved)
-        result.events.append({"taken_over": {"turned_deg": round(motion.angle_deg, 1),
-                                             "slid": round(motion.distance, 4), "held": held}})
+        self.state.taken_over = {"turned_deg": round(motion.angle_deg, 1), "slid": round(motion.distance, 4),
+                                 "held": held}
+        result.events.append({"taken_over": self.state.taken_over})
         return moved, held
+
+    def _door_turned(self, motion: PartMotion, start, state: PullState) -> bool:
+        """Whether a door taken over turned about an upright hinge at least ``push_min_turn`` (deg);
+        if so, the handle's path from ``start`` (its grasp point in the first image) along that turn
+        becomes the pull's held track, from which the push recovery finds the door's arc."""
+        rot = motion.rot
+        if rot[2, 2] < 0.99 or motion.angle_deg < self.config.recovery.push_min_turn:
+            return False
+        turn = math.atan2(rot[1, 0], rot[0, 0])
+        pivot = motion.pivot
+        state.track = []
+        for f in np.linspace(0.0, 1.0, 12):
+            c, s = math.cos(f * turn), math.sin(f * turn)
+            r = np.asarray(start, float) - pivot
+            state.track.append(pivot + np.array([c * r[0] - s * r[1], s * r[0] + c * r[1], r[2]]))
+        return True
 
     def locate(self, robot, obs: Observation, result: PlanResult, observed: tuple = ()):
         """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle;

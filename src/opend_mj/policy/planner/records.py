@@ -145,13 +145,16 @@ class EpisodeState:
     taken after a wrong handle was pushed back); ``handle``: the 3D handle being opened;
     ``hinge``: the door's hinge line (world x, y) seen in depth, or None; ``first_pos``: the first
     grasp's site position (re-grasps with nothing held go near it); ``approach_target``: where the
-    latest approach took the grasp site (the fingers close there)."""
+    latest approach took the grasp site (the fingers close there); ``taken_over``: see below."""
 
     first: Observation | None = None
     handle: object | None = None  # HandleEstimate
     hinge: np.ndarray | None = None
     first_pos: np.ndarray | None = None
     approach_target: np.ndarray | None = None
+    #: an episode taken over mid-way: {"turned_deg", "slid", "held"} (how far the part had moved,
+    #: whether the hand held the handle); None for an episode planned from its start
+    taken_over: dict | None = None
 
 
 @dataclass
@@ -164,6 +167,8 @@ class PartMotion:
     rot: np.ndarray = field(default_factory=lambda: np.eye(3))
     pivot: np.ndarray = field(default_factory=lambda: np.zeros(3))
     shift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: how far the part is open, as a share of its joint's range (None: unknown)
+    share: float | None = None
 
     def point(self, p) -> np.ndarray:
         """Where a point of the part at ``p`` (world, m) in the first image is now."""
