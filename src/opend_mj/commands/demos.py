@@ -155,15 +155,19 @@ def bundle_policy(checkpoints, out, ensemble_decay, routes):
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="JSON lines, one per takeover; appended to, resumable [results/expert/<lead>_<hand>_<split>.jsonl].")
+@click.option("--summary", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the counts per lead, hand and switch as JSON (what `opend report` reads for real cabinets).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True)
 @click.option("--progress/--no-progress", default=True)
-def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, out, workers, progress):
+def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, out, summary, workers, progress):
     """The planner as an interactive expert, taking over episodes mid-way from a lead: what it opens."""
     import json
 
     from opend_mj.evaluation.agents import parse_policy_args
     from opend_mj.evaluation.jobs import make_jobs
-    from opend_mj.evaluation.takeover import check_expert, summarise_takeovers
+    import sys
+
+    from opend_mj.evaluation.takeover import check_expert, summarise_takeovers, takeover_summary
 
     jobs = make_jobs(cabinets_dir, hands, "oracle", split=split, limit=limit)
     if not jobs:
@@ -179,6 +183,11 @@ def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, o
     keys = {(j.cabinet, j.joint, j.hand, j.seed) for j in jobs}
     records = [r for r in records if (r["cabinet"], r["joint"], r["hand"], r["seed"]) in keys]
     click.echo(f"{out}: ran {counts['ran']}, errors {counts['errors']}")
+    if summary is not None:
+        summary.parent.mkdir(parents=True, exist_ok=True)
+        command = "opend expert-check " + " ".join(sys.argv[2:])
+        summary.write_text(json.dumps(takeover_summary(records, command=command), indent=1) + "\n")
+        click.echo(f"summary -> {summary}")
     for (who, switch), (s, n) in sorted(summarise_takeovers(records).items(), key=lambda kv: str(kv[0])):
         at = "all switches" if switch == "all" else f"switch {switch:g} s"
         click.echo(f"  {who}, {at}: {s}/{n} = {100.0 * s / max(n, 1):.1f} % opened")

@@ -237,7 +237,26 @@ def results_markdown(results_dir: Path) -> str:
                 "| condition | " + " | ".join(HAND_TITLES[h] for h in HANDS) + " |", "|---" * 5 + "|"]
         out += rows + [""]
     out += robustness_sections(results_dir)
+    out += expert_sections(results_dir)
     return "\n".join(out)
+
+
+def expert_sections(results_dir: Path) -> list[str]:
+    """The planner as an interactive expert (`opend expert-check`): episodes taken over mid-way, on
+    generated cabinets (results/expert/*.jsonl) and real ones (results/real/expert_*.json, counts only)."""
+    from opend_mj.evaluation.takeover import load_takeovers, takeover_markdown
+
+    results_dir = Path(results_dir)
+    paths = sorted((results_dir / "expert").glob("*.jsonl")) + sorted((results_dir / "real").glob("expert_*.json"))
+    if not paths:
+        return []
+    out = ["## The planner as an interactive expert", "",
+           "A lead acts until the switch time, then a fresh expert (the planner with oracle boxes, started from the",
+           "state the lead left) acts to the end; docs/demonstrations.md.", ""]
+    for path in paths:
+        where = "real cabinets" if path.parent.name == "real" else "generated test split"
+        out += takeover_markdown(load_takeovers(path), f"{where} (`{path.relative_to(results_dir.parent).as_posix()}`)")
+    return out
 
 
 #: What `opend robustness` writes under results/ (`make robustness`, `make robustness-real`): its records,

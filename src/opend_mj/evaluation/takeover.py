@@ -206,4 +206,49 @@ def summarise_takeovers(records: list[dict]) -> dict:
     return table
 
 
-__all__ = ["PLANNER_LEAD", "check_expert", "summarise_takeovers", "takeover_episode", "takeover_key"]
+def takeover_summary(records: list[dict], command: str = "") -> dict:
+    """The aggregate `opend report` reads (``--summary``; the only form in which takeovers on real
+    cabinets are kept): per lead, hand and switch time, [opened, episodes, opened to >= 75 % of the
+    range]; ``cabinets`` and ``targets`` counted over the records."""
+    cells: dict = {}
+    for r in records:
+        for switch in (f"{float(r['switch']):g}", "all"):
+            cell = cells.setdefault(r["lead_spec"], {}).setdefault(r["hand"], {}).setdefault(switch, [0, 0, 0])
+            cell[0] += bool(r.get("success"))
+            cell[1] += 1
+            cell[2] += bool(r.get("success")) and (r.get("range_ratio") or 0.0) >= 0.75
+    return {"cabinets": len({r["cabinet"] for r in records}),
+            "targets": len({(r["cabinet"], r["joint"]) for r in records}), "command": command, "cells": cells}
+
+
+def load_takeovers(path: Path) -> dict:
+    """A takeover summary: a records file (``.jsonl``, summarised) or a summary (``.json``)."""
+    path = Path(path)
+    if path.suffix == ".jsonl":
+        records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+        return takeover_summary(records, command=f"opend expert-check ... --out {path.as_posix()}")
+    return json.loads(path.read_text())
+
+
+def takeover_markdown(summary: dict, title: str) -> list[str]:
+    """A summary as a table: one row per lead and hand, a column per switch time (opened %, n)."""
+    hands = ("franka", "allegro", "shadow", "skeleton")
+    out = [f"### {title}", "", f"Made by: `{summary.get('command', 'opend expert-check')}` "
+           f"({summary.get('cabinets')} cabinets, {summary.get('targets')} targets). Cells: opened (> 20 %) / "
+           ">= 75 % of the range, in percent.", ""]
+    for lead, by_hand in summary["cells"].items():
+        switches = sorted({s for h in by_hand.values() for s in h if s != "all"}, key=float) + ["all"]
+        out += [f"| lead `{lead}`, hand | " + " | ".join(f"switch {s} s" if s != "all" else "all" for s in switches)
+                + " |", "|---" * (len(switches) + 1) + "|"]
+        for hand in [h for h in hands if h in by_hand] + [h for h in by_hand if h not in hands]:
+            cells = []
+            for s in switches:
+                ok, n, full = by_hand[hand].get(s, [0, 0, 0])
+                cells.append(f"{100.0 * ok / n:.1f} / {100.0 * full / n:.1f} ({n})" if n else "-")
+            out.append(f"| {hand} | " + " | ".join(cells) + " |")
+        out.append("")
+    return out
+
+
+__all__ = ["PLANNER_LEAD", "check_expert", "load_takeovers", "summarise_takeovers", "takeover_episode", "takeover_key",
+           "takeover_markdown", "takeover_summary"]

@@ -39,7 +39,7 @@ from opend_mj.policy.planner.robot import new_depth
 from opend_mj.policy.planner.slide import PanelSliding
 from opend_mj.policy.planner.stage import Stage, StageContext
 from opend_mj.sim.hands import HandModel, HandPlannerConfig, HandSpec, get_hand
-from opend_mj.transforms import quat_axis_z
+from opend_mj.transforms import quat_axis_z, turn_about_z
 
 #: After a finished pull with ``release``: the fingers stay closed, then open, for these times
 #: (s), and the hand backs off this far (m) along its approach axis.
@@ -301,6 +301,16 @@ class Planner(Stage):
             state.direction = out
             state.turned = state.peak_turn = math.degrees(math.atan2(b[0] * out[1] - b[1] * out[0], float(b @ out)))
         held = self.approach.holds(robot, moved)
+        targets = getattr(robot, "finger_targets", None)
+        if held and targets is not None:
+            # a held handle is pulled on as it is held: the hand's orientation and finger targets kept
+            # (turning the hand or changing its grip on a part that moves with it would throw the part)
+            quat = robot.site_pose()[1]
+            door = self.config.door
+            ang = state.turned
+            yaw = door.yaw_gain * ang + math.copysign(min(abs(ang), door.yaw_lead_deg), ang)
+            state.quat0 = turn_about_z(quat, -math.radians(yaw))  # so that the pull's yaw starts at it
+            moved = replace(moved, quat=quat, closed=np.array(targets(), float))
         self.state.taken_over = {"turned_deg": round(motion.angle_deg, 1), "slid": round(motion.distance, 4),
                                  "held": held}
         result.events.append({"taken_over": self.state.taken_over})

@@ -30,6 +30,7 @@ class Robot:
         self._data = self.physics.data.ptr
         self._site_id = int(self.physics.bind(self.task.hand.grasp_site).element_id)
         self._finger_qpos = np.array([int(a) for a in self.physics.bind(self.task.hand.joints).qposadr])
+        self._finger_ctrl = np.array([int(a) for a in self.physics.bind(self.task.hand.actuators).element_id])
         self._touch = HandTouch(self.task.hand, self.physics)  # the hand's own state
 
     @property
@@ -54,6 +55,10 @@ class Robot:
     def finger_qpos(self) -> np.ndarray:
         """The finger joints' positions (rad for hinges, m for slides)."""
         return self._data.qpos[self._finger_qpos]
+
+    def finger_targets(self) -> np.ndarray:
+        """The finger actuators' current targets (what the hand was last commanded; actuator units)."""
+        return self._data.ctrl[self._finger_ctrl].copy()
 
     def contact_touch(self) -> dict[str, float]:
         """Normal force (N) on each part of the hand from things that are not the hand (`HandTouch`)."""
