@@ -336,3 +336,34 @@ def test_training_demos_of_one_kind(demos_file):
                                        "--out", "never.pt", "--steps", "1", "--no-progress"])
     assert result.exit_code != 0 and "no usable demonstrations" in result.output
     assert not Path("never.pt").exists()
+
+
+def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small_dataset, tmp_path):
+    """`opend train-policy --dagger 1`: round 0 trains on the demos; round 1 rolls that policy out,
+    the planner as expert labels every state it reaches (the rollouts are training data whether or
+    not they opened their part), trains again, and validates each round on cabinets kept apart. A
+    second run finds every round done and runs no episode again."""
+    from opend_mj.apps.dagger import split_cabinets
+    from opend_mj.apps.demos import read_demos
+    from opend_mj.evaluation.jobs import make_jobs
+
+    out, _ = demos_file
+    folder = tmp_path / "dagger"
+    args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "20",
+            "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
+            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--no-progress"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "bc.json").read_text())["dagger"]
+    assert [r["round"] for r in summary["rounds"]] == [0, 1]
+    assert all(r["val_episodes"] == 1 and 0.0 <= r["val_success"] <= 100.0 for r in summary["rounds"])
+    assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
+    _, rollouts = read_demos(folder / "round_1.hdf5")
+    _, val = split_cabinets(make_jobs(small_dataset, ["franka"], "oracle", split="train"), 0.15, 0)
+    assert rollouts and all(d.attrs["labels"] == "expert" and d.attrs["cabinet"] not in val for d in rollouts)
+    for d in rollouts:  # labels are the expert's absolute actions; what was stepped is kept beside them
+        assert d.actions.shape == d.extra["actions_executed"].shape and np.isfinite(d.actions).all()
+    log = (folder / "round_1.hdf5.episodes.jsonl").read_text()
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0, again.output
+    assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log

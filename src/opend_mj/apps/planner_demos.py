@@ -76,6 +76,8 @@ class RecordConfig:
     image_size: int = 0  # RGB-D of the front camera at every step, this many pixels square (0: none)
     keep_failures: bool = False
     noise: ActionNoise = ActionNoise()
+    #: a DAgger round: a policy acts and the planner as an expert labels (`opend_mj.apps.dagger`)
+    rollout: object | None = None
 
     def __post_init__(self):
         if self.image_size and self.image_size < 16:
@@ -255,6 +257,13 @@ def _record_group(args) -> list[tuple[dict, Demo | None]]:
     for job in jobs:
         try:
             env = env or make_episode_env(job)
+            if config.rollout is not None:
+                from opend_mj.apps.dagger import rollout_episode
+
+                line, demo = rollout_episode(job, env, config)
+                line["kept"] = demo is not None
+                out.append((line, demo))
+                continue
             line, demo = record_episode(job, env, config)
             keep = line["success"] or config.keep_failures
             line["kept"] = keep

@@ -84,8 +84,26 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
 @click.option("--device", default="cpu", show_default=True)
+@click.option("--dagger", "dagger_rounds", type=click.IntRange(min=0), default=None,
+              help="DAgger: after training on the demos, this many rounds of rollouts of the policy on the "
+                   "training split, labelled by the planner as an expert, and training again (docs/demonstrations.md).")
+@click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=Path("cabinets"), show_default=True, help="DAgger: the cabinets whose training split is rolled out.")
+@click.option("--dagger-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="DAgger: every round's rollouts, checkpoints and validation episodes [build/dagger/<hand>].")
+@click.option("--beta0", type=click.FloatRange(0, 1), default=0.5, show_default=True,
+              help="DAgger: the share of steps at which the expert's action is stepped in round 1.")
+@click.option("--beta-decay", type=click.FloatRange(0, 1), default=0.5, show_default=True,
+              help="DAgger: that share's factor from one round to the next.")
+@click.option("--dagger-targets", type=click.IntRange(min=1), default=None,
+              help="DAgger: roll out the first K training targets only [all].")
+@click.option("--val-targets", type=click.IntRange(min=1), default=None,
+              help="DAgger: validate on the first K validation targets only [all].")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
 def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, kind, seed, threads, device,
+                 dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, val_targets, workers,
                  progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
@@ -98,6 +116,13 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
                if v is not None}
     config = dataclasses.replace(BCConfig(seed=seed), **changes)
     out = out or Path("checkpoints") / f"bc_{hand}.pt"
+    if dagger_rounds is not None:
+        from opend_mj.apps.dagger import DaggerConfig
+
+        dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
+                              limit=dagger_targets, val_limit=val_targets)
+        _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, workers, threads, progress)
+        return
     try:
         demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind, hand=hand)
         summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device,
@@ -107,6 +132,29 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     last = summary["history"][-1] if summary["history"] else {}
     click.echo(f"{summary['demos']} demos ({summary['samples']} steps, {summary['cabinets']} cabinets), "
                f"{summary['parameters']} parameters, {summary['seconds']:.0f} s; last {last} -> {out}")
+
+
+def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, folder, workers, threads, progress) -> None:
+    """`opend train-policy --dagger`: the DAgger rounds, then the last round's checkpoint copied to ``out``."""
+    import json
+    import shutil
+
+    from opend_mj.apps.dagger import run_dagger
+    from opend_mj.apps.demos import DemoFileError
+
+    folder = folder or Path("build/dagger") / hand
+    try:
+        summary = run_dagger(list(demo_files), hand, cabinets_dir, folder, config, dagger, workers=workers,
+                             threads=threads, progress=progress, log=click.echo)
+    except (ValueError, FileNotFoundError, DemoFileError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    last = Path(summary["rounds"][-1]["checkpoint"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(last, out)
+    trained = json.loads(last.with_suffix(".json").read_text())
+    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
+    click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
+                                                           for r in summary["rounds"]) + f" -> {out}")
 
 
 @click.command("bundle-policy")

@@ -23,7 +23,8 @@ from opend_mj.evaluation.runner import instruction_for, make_episode_env
 PLANNER_LEAD = "planner"
 
 
-def _agent_info(job: EpisodeJob, env, reader):
+def agent_info(job: EpisodeJob, env, reader):
+    """What an agent is told at the start of an episode of ``job`` on ``env`` (absolute control)."""
     from opend_mj.policy.agents import EpisodeInfo
 
     spec = env.action_spec()
@@ -63,7 +64,7 @@ def takeover_episode(job: EpisodeJob, lead, switch: float, env=None, expert_conf
                 lead_expert = PlannerExpert(env, first, cam, config, hand=job.hand)
                 act = lead_expert.action
             else:
-                lead.reset(_agent_info(job, env, reader))
+                lead.reset(agent_info(job, env, reader))
                 obs0 = {**reader.proprio(), "instruction": task.instruction, **reader.camera_arrays(),
                         "rgb": rgb, "depth": first.depth}
 
@@ -250,5 +251,5 @@ def takeover_markdown(summary: dict, title: str) -> list[str]:
     return out
 
 
-__all__ = ["PLANNER_LEAD", "check_expert", "load_takeovers", "summarise_takeovers", "takeover_episode", "takeover_key",
+__all__ = ["PLANNER_LEAD", "agent_info", "check_expert", "load_takeovers", "summarise_takeovers", "takeover_episode", "takeover_key",
            "takeover_markdown", "takeover_summary"]

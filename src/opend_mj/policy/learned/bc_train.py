@@ -51,9 +51,12 @@ class DemoArrays:
 
 
 def usable(demo) -> bool:
-    """A successful demonstration whose first image gave a handle (its features are finite)."""
+    """A successful demonstration, or a DAgger rollout labelled by the expert (``labels`` "expert":
+    its labels are the expert's whatever the rollout did), whose first image gave a handle (its
+    features are finite)."""
     feats = np.asarray(demo.obs.get("handle_features", np.full((1, 1), np.nan)))
-    return bool(demo.attrs.get("success")) and len(demo.actions) > 0 and bool(np.isfinite(feats[0]).all())
+    wanted = bool(demo.attrs.get("success")) or demo.attrs.get("labels") == "expert"
+    return wanted and len(demo.actions) > 0 and bool(np.isfinite(feats[0]).all())
 
 
 def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:

@@ -28,6 +28,7 @@ from opend_mj.policy.planner.moves import hold, move
 from opend_mj.policy.planner.pull import Pulling
 from opend_mj.policy.planner.records import (
     EpisodeState,
+    Flap,
     GraspChoice,
     Observation,
     PartMotion,
@@ -300,6 +301,21 @@ class Planner(Stage):
             b = state.base_dir
             state.direction = out
             state.turned = state.peak_turn = math.degrees(math.atan2(b[0] * out[1] - b[1] * out[0], float(b @ out)))
+            if motion.angle_deg > 2.0:
+                # the camera's flap looks compare the front with the first image, in which this door was
+                # still closed: the motion tells a side door from a flap instead
+                state.flap_looked = len(self.config.door.flap_look_distances)
+                if motion.rot[2, 2] < 0.9:  # turned about a level hinge: a flap, hinged above or below the grasp
+                    start = np.asarray(grasp.pos, float)
+                    sign = 1.0 if motion.pivot[2] > start[2] else -1.0
+                    state.flap = Flap(start=start, out=state.base_dir.copy(), sign=sign,
+                                      reach=abs(float(motion.pivot[2] - start[2])))
+                    state.hinge = None
+                    state.direction, state.turned, state.peak_turn = state.base_dir.copy(), 0.0, 0.0
+                elif self.config.door.hinge_pull:  # a side door: the pull goes on about its hinge
+                    hinge = np.asarray(motion.pivot[:2], float)
+                    self.state.hinge = hinge
+                    Pulling._turn_about(state, hinge, np.asarray(grasp.pos[:2], float) - hinge)
         held = self.approach.holds(robot, moved)
         targets = getattr(robot, "finger_targets", None)
         if held and targets is not None:
@@ -309,7 +325,8 @@ class Planner(Stage):
             door = self.config.door
             ang = state.turned
             yaw = door.yaw_gain * ang + math.copysign(min(abs(ang), door.yaw_lead_deg), ang)
-            state.quat0 = turn_about_z(quat, -math.radians(yaw))  # so that the pull's yaw starts at it
+            if state.flap is None:  # (a flap's pull pitches the grasp's own orientation by the flap's angle)
+                state.quat0 = turn_about_z(quat, -math.radians(yaw))  # so that the pull's yaw starts at it
             moved = replace(moved, quat=quat, closed=np.array(targets(), float))
         self.state.taken_over = {"turned_deg": round(motion.angle_deg, 1), "slid": round(motion.distance, 4),
                                  "held": held}
