@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real robustness robustness-real install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -87,6 +87,30 @@ robustness-real: install
 	mkdir -p results/real
 	cp $(REAL_OUT)/robustness/real$(TAG).json results/real/robustness_$(SPLIT)$(TAG).json
 	cp $(REAL_OUT)/robustness/real$(TAG).png results/real/robustness_$(SPLIT)$(TAG).png
+
+## The planner as an interactive expert (docs/demonstrations.md): episodes of the generated test split taken
+## over mid-way from the planner itself, every hand, at four switch times.
+expert-check: install
+	$(BIN)/opend expert-check --hand franka --hand allegro --hand shadow --hand skeleton --switch 2 --switch 4 \
+		--switch 6 --switch 8 --workers $(WORKERS) --out results/expert/planner_test.jsonl
+
+## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
+## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
+## then its record on the generated test split. HAND=allegro DAGGER=2 SEEDS=2 STEPS=3000.
+HAND ?= allegro
+DAGGER ?= 2
+SEEDS ?= 2
+STEPS ?= 3000
+SEED ?= 0
+BC_DIR ?= build/bc/$(HAND)
+train-bc: install assets
+	$(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) --solver oracle \
+		--workers $(WORKERS) --out $(BC_DIR)/demos.hdf5
+	$(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) --seed $(SEED) \
+		--dagger $(DAGGER) --cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --workers $(WORKERS) \
+		--out $(BC_DIR)/bc_$(HAND).pt
+	$(BIN)/opend run --policy bc --policy-arg checkpoint=$(BC_DIR)/bc_$(HAND).pt --hand $(HAND) --split test \
+		--cabinets $(CABINETS) --workers $(WORKERS) --out $(BC_DIR)/test.jsonl
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

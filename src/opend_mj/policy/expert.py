@@ -245,10 +245,10 @@ class PlannerExpert:
             self.result = None
             self._start(part_motion(self.task, self.physics))
             label = self._next()
-        if label is None:
-            return self._none("finished")
         if self.taken_over is None and self._planner.state.taken_over is not None:
             self.taken_over = dict(self._planner.state.taken_over)
+        if label is None:
+            return self._none("finished")
         self.why = None
         return label[0]
 

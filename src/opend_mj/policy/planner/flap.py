@@ -137,9 +137,8 @@ class FlapSteering(Stage):
         fit = float(((u * u + w * w) * w).sum()) / den
         return float(np.clip(fit, share * flap.reach, flap.reach))
 
-    def steer(self, site, run, state: PullState) -> None:
-        """Pull along the flap's circle: the opening tangent at the site, the hand pitched by the
-        flap's angle (``state.tilt``, deg, rising positive)."""
+    def _tangent(self, site, state: PullState) -> tuple[float, float]:
+        """The flap circle's opening tangent at the site: (along ``out``, up)."""
         flap = state.flap
         radius = self.radius(flap, state)
         centre = flap.start + np.array([0.0, 0.0, flap.sign * radius])
@@ -147,7 +146,18 @@ class FlapSteering(Stage):
         u = float(d[:2] @ flap.out[:2])
         w = float(d[2])
         norm = max(1e-6, math.hypot(u, w))
-        t_u, t_w = flap.sign * -w / norm, flap.sign * u / norm
+        return flap.sign * -w / norm, flap.sign * u / norm
+
+    def tilt_at(self, site, state: PullState) -> float:
+        """The flap's angle (deg, rising positive) where its handle is at ``site``."""
+        t_u, t_w = self._tangent(site, state)
+        return math.degrees(math.atan2(t_w, t_u))
+
+    def steer(self, site, run, state: PullState) -> None:
+        """Pull along the flap's circle: the opening tangent at the site, the hand pitched by the
+        flap's angle (``state.tilt``, deg, rising positive)."""
+        flap = state.flap
+        t_u, t_w = self._tangent(site, state)
         state.direction = t_u * flap.out + np.array([0.0, 0.0, t_w])
         state.tilt = math.degrees(math.atan2(t_w, t_u))
         state.peak_tilt = state.tilt if abs(state.tilt) > abs(state.peak_tilt) else state.peak_tilt

@@ -66,3 +66,19 @@ def yawed(door, state, ang: float, tilt: float = 0.0) -> np.ndarray:
     axis = np.cross(h, np.array([0.0, 0.0, 1.0]))  # rotating h about it by +tilt lifts it
     q = quat_mul(axis_angle_quat(axis, math.radians(cfg.tilt_gain * tilt)), quat)
     return q / np.linalg.norm(q)
+
+
+def unyawed(door, state, quat, ang: float, tilt: float = 0.0) -> np.ndarray:
+    """The grasp orientation from which :func:`yawed` gives ``quat`` for a pull turned ``ang`` (deg)
+    and tilted ``tilt`` (deg): a pull taken over mid-way goes on from the hand's own orientation."""
+    cfg = door
+    q = np.asarray(quat, float)
+    if tilt != 0.0:
+        a = math.radians(ang)
+        b = state.base_dir
+        h = np.array([b[0] * math.cos(a) - b[1] * math.sin(a), b[0] * math.sin(a) + b[1] * math.cos(a), 0.0])
+        axis = np.cross(h, np.array([0.0, 0.0, 1.0]))
+        q = quat_mul(axis_angle_quat(axis, -math.radians(cfg.tilt_gain * tilt)), q)
+    yaw = cfg.yaw_gain * ang + math.copysign(min(abs(ang), cfg.yaw_lead_deg), ang)
+    q = turn_about_z(q, -math.radians(yaw))
+    return q / np.linalg.norm(q)

@@ -170,6 +170,19 @@ class PartMotion:
     #: how far the part is open, as a share of its joint's range (None: unknown)
     share: float | None = None
 
+    @property
+    def axis(self) -> np.ndarray:
+        """The turn's axis (world unit vector; zeros for a slide)."""
+        r = self.rot
+        v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+        n = float(np.linalg.norm(v))
+        return v / n if n > 1e-9 else np.zeros(3)
+
+    @property
+    def upright(self) -> bool:
+        """Whether the part turned about an upright axis (a side door's hinge), not a level one (a flap's)."""
+        return abs(float(self.axis[2])) > 0.9
+
     def point(self, p) -> np.ndarray:
         """Where a point of the part at ``p`` (world, m) in the first image is now."""
         return self.pivot + self.rot @ (np.asarray(p, float) - self.pivot) + self.shift
