@@ -75,6 +75,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for
     from opend_mj.evaluation.takeover import agent_info
     from opend_mj.policy.expert import PlannerExpert
+    from opend_mj.policy.learned.bc import style_index
     from opend_mj.policy.planner import Observation
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.envs import SceneReader, instruction_onehot
@@ -89,7 +90,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     agent = load_agent(rollout.policy, rollout.policy_args)
     rng = np.random.default_rng(noise_seed(job) + [rollout.round])
     steps: dict[str, list] = {}
-    labels, executed = [], []
+    labels, executed, styles = [], [], []
     percept = None
     why = "time"
     try:
@@ -114,6 +115,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
                     for k, v in proprio.items():
                         steps.setdefault(k, []).append(np.array(v, float))
                     labels.append(np.asarray(label, float))
+                    styles.append(style_index(expert.style))
                     sent = label if rng.random() < rollout.beta else np.asarray(action, float)
                     executed.append(sent)
                     if env.step(sent).last():
@@ -153,7 +155,8 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
         "expert_restarts": int(expert.restarts),
     }
     demo = Demo(actions=np.asarray(labels, float).reshape(n, -1), obs=obs_arrays, attrs=attrs,
-                extra={"actions_executed": np.asarray(executed, float).reshape(n, -1)})
+                extra={"actions_executed": np.asarray(executed, float).reshape(n, -1),
+                       "grasp_style": np.asarray(styles, np.int8).reshape(n)})
     demo.env_args = env_args(task.config)  # type: ignore[attr-defined]
     return line, demo
 

@@ -138,6 +138,8 @@ class _RecordingEnv:
     def __init__(self, env, reader, adapter, camera=None, noise: NoiseProcess | None = None):
         self._env, self._reader, self._adapter, self._camera = env, reader, adapter, camera
         self._noise = noise
+        self.style = -1  # the planner's current grasp style (`bc.style_index`), set as each approach starts
+        self.styles: list[int] = []  # one per step
         self.obs: dict[str, list] = {}
         self.actions: list[np.ndarray] = []  # the planner's (clean) actions: the labels
         self.executed: list[np.ndarray] = []  # the actions sent (the labels plus noise, where noise is on)
@@ -159,6 +161,7 @@ class _RecordingEnv:
             self.obs.setdefault("depth", []).append(np.asarray(depth, np.float32))
         a = np.asarray(action, float)
         self.actions.append(a.copy())
+        self.styles.append(self.style)
         ad = self._adapter
         conj = obs["mocap_quat"] * np.array([1.0, -1.0, -1.0, -1.0])
         rot = _rotvec(quat_mul(a[3:7] / np.linalg.norm(a[3:7]), conj))
@@ -176,8 +179,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     """One planner episode of ``job``: (its log line, the demonstration). ``env``: a scene of the
     job's `scene_key` to reuse (as `opend run` reuses them), else one is made."""
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
-    from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle
     from opend_mj.policy.factory import build_planner
+    from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle, style_index
     from opend_mj.policy.planner import Observation, Robot
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.envs import ActionAdapter, SceneReader, instruction_onehot
@@ -194,8 +197,13 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
         with RGBDCamera(physics, "front", size, size) as cam:
             rgb, depth = cam.render()
             view = task.camera_view(physics)
+            def on_stage(name, info):  # the grasp style of each approach, for the steps that follow it
+                if name == "approach" and "style" in info:
+                    rec.style = style_index(info["style"])
+
             planner = build_planner(job.solver, task.hand.spec.name, pull=job.pull, use_grasp_file=job.use_grasp_file,
-                                    ground_truth=lambda: task.handle_boxes(physics)[task.target.joint])
+                                    ground_truth=lambda: task.handle_boxes(physics)[task.target.joint],
+                                    on_stage=on_stage)
             percept = perceive_handle(planner.solver, rgb, depth, task.instruction, view, planner.config)
             adapter = ActionAdapter(job.hand, task.config)
             noise = NoiseProcess(config.noise, adapter.finger_low, adapter.finger_high, task.control_timestep,
@@ -235,7 +243,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
         "hinge_seen": (percept.hinge or "") if percept is not None else "",
         "action_noise": json.dumps(dataclasses.asdict(config.noise)) if config.noise.active else "",
     }
-    extra = {"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1)}
+    extra = {"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1),
+             "grasp_style": np.asarray(rec.styles, np.int8).reshape(n)}
     if config.noise.active:
         extra["actions_executed"] = np.asarray(rec.executed, float).reshape(n, -1)
     demo = Demo(actions=np.asarray(rec.actions, float).reshape(n, -1), obs=obs, attrs=attrs,
@@ -420,7 +429,8 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
                     if missing:
                         raise DemoFileError(f"{path}: {name} has no obs/{missing[0]} (not recorded by `opend demos`)")
                     obs = {k: d["obs"][k][()].astype(np.float32) for k in TRAINING_KEYS}
-                    out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs))
+                    extra = {"grasp_style": d["grasp_style"][()]} if "grasp_style" in d else {}
+                    out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs, extra=extra))
                     if max_demos is not None and len(out) >= max_demos:
                         return out
             except (OSError, KeyError, RuntimeError) as exc:

@@ -113,6 +113,7 @@ class PlannerExpert:
         self.unlabelled = 0
         self.taken_over: dict | None = None  # the first plan's view of the state it took over
         self.stage = ""
+        self.style = ""  # the grasp style the plan holds or approaches with ("" before it chose one)
         self._thread = None
         self._waiting = False  # the plan waits for the scene to be stepped
         self._label = None  # (action, site target) of the plan's latest step
@@ -135,7 +136,7 @@ class PlannerExpert:
         task, physics = self.task, self.physics
         planner = build_planner(self.config.solver, self.hand, pull=self.config.pull,
                                 ground_truth=lambda: task.handle_boxes(physics)[task.target.joint],
-                                on_stage=lambda name, info: setattr(self, "stage", name))
+                                on_stage=self._on_stage)
         self._planner = planner
         self._inbox, self._outbox = queue.Queue(), queue.Queue()
         robot = _HandoverRobot(self.env, self)
@@ -154,6 +155,12 @@ class PlannerExpert:
         self._waiting = False
         self._thread = threading.Thread(target=run, name="planner-expert", daemon=True)
         self._thread.start()
+
+    def _on_stage(self, name: str, info: dict) -> None:
+        """A stage of the plan starts: its name, and an approach's grasp style."""
+        self.stage = name
+        if name == "approach" and "style" in info:
+            self.style = str(info["style"])
 
     def _stop(self) -> None:
         if self._thread is not None:
@@ -245,8 +252,11 @@ class PlannerExpert:
             self.result = None
             self._start(part_motion(self.task, self.physics))
             label = self._next()
-        if self.taken_over is None and self._planner.state.taken_over is not None:
-            self.taken_over = dict(self._planner.state.taken_over)
+        taken = self._planner.state.taken_over
+        if taken is not None and self.taken_over is None:
+            self.taken_over = dict(taken)
+        if taken is not None and self.stage in ("", "locate", "pull"):  # a held handle: the plan's grasp
+            self.style = taken.get("style", self.style)
         if label is None:
             return self._none("finished")
         self.why = None

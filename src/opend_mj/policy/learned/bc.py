@@ -39,6 +39,15 @@ from opend_mj.transforms import mat_to_quat, quat_to_mat
 
 #: Observation keys a step feature reads (all in the agent's observation, `policy.agents`).
 STEP_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch", "time")
+#: The planner's grasp styles (`policy.planner.GraspChoice.style`): the modes of the grasp-style token.
+GRASP_STYLES = ("hook", "pinch", "wrap", "hook_down", "press_down")
+
+
+def style_index(style) -> int:
+    """The index of a grasp style in :data:`GRASP_STYLES`; -1 for none or unknown."""
+    return GRASP_STYLES.index(style) if style in GRASP_STYLES else -1
+
+
 #: Length of :func:`percept_vector` (checkpoints of before the hinge line read its first 22 numbers).
 PERCEPT_DIM = 25
 HINGE_SIDES = ("left", "right")
@@ -61,6 +70,11 @@ class BCConfig:
     steps: int = 3000  # optimiser steps
     seed: int = 0
     ensemble_decay: float = 0.01  # ACT's temporal-ensemble weight exp(-decay * age), oldest first
+    #: the grasp-style token: 0 (none), or len(GRASP_STYLES): a head predicts the grasp style the
+    #: expert used at each step from the encoded inputs, and the decoder is conditioned on it
+    #: (the true style in training, the predicted one when acting)
+    modes: int = 0
+    mode_weight: float = 0.1  # the style's cross-entropy beside the actions' L1 in the loss
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -240,20 +254,33 @@ def build_model(ctx_dim: int, step_dim: int, act_dim: int, config: BCConfig):
             self.encoder = nn.TransformerEncoder(enc, c.enc_layers, enable_nested_tensor=False)
             self.decoder = nn.TransformerDecoder(dec, c.dec_layers)
             self.head = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, act_dim))
+            if c.modes:  # the grasp-style token
+                self.mode_head = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, c.modes))
+                self.mode_embed = nn.Embedding(c.modes, d)
             for name, dim in (("ctx", ctx_dim), ("step", step_dim), ("act", act_dim)):
                 self.register_buffer(f"{name}_mean", torch.zeros(dim))
                 self.register_buffer(f"{name}_std", torch.ones(dim))
 
-        def forward(self, ctx, steps):
-            """ctx (B, C), steps (B, L, S), both raw -> (B, chunk, A) standardised actions."""
+        def predict(self, ctx, steps, mode=None):
+            """ctx (B, C), steps (B, L, S), both raw -> ((B, chunk, A) standardised actions, (B, modes)
+            style logits or None). ``mode`` (B,): the styles to condition on (default: the predicted ones)."""
             x0 = self.ctx_in((ctx - self.ctx_mean) / self.ctx_std)[:, None]
             xs = self.step_in((steps - self.step_mean) / self.step_std)
             memory = self.encoder(torch.cat([x0, xs], dim=1) + self.token_pos)
             q = self.queries.expand(len(ctx), -1, -1)
-            return self.head(self.decoder(q, memory))
+            logits = None
+            if config.modes:
+                logits = self.mode_head(memory[:, 0])
+                chosen = logits.argmax(dim=-1) if mode is None else mode
+                q = q + self.mode_embed(chosen)[:, None]
+            return self.head(self.decoder(q, memory)), logits
+
+        def forward(self, ctx, steps, mode=None):
+            """ctx (B, C), steps (B, L, S), both raw -> (B, chunk, A) standardised actions."""
+            return self.predict(ctx, steps, mode)[0]
 
         def actions(self, ctx, steps):
-            """Raw (de-standardised) encoded actions."""
+            """Raw (de-standardised) encoded actions (conditioned on the predicted grasp style)."""
             return self(ctx, steps) * self.act_std + self.act_mean
 
     return ChunkTransformer()

@@ -39,6 +39,7 @@ class DemoArrays:
     length: np.ndarray  # (D,) steps per demo
     max_time: float  # s: the longest demonstration
     cabinets: list[str]
+    modes: np.ndarray | None = None  # (N,) int: the grasp style of each step (-1: unknown); None: not recorded
 
     @property
     def stop_time(self) -> float:
@@ -60,11 +61,14 @@ def usable(demo) -> bool:
 
 
 def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:
-    """The samples of the usable demos (see :func:`usable`)."""
-    ctx, steps, acts, lengths, cabinets, max_time = [], [], [], [], [], 0.0
+    """The samples of the usable demos (see :func:`usable`); ``modes`` where every one recorded its
+    grasp styles (``grasp_style``, `opend demos`)."""
+    ctx, steps, acts, lengths, cabinets, max_time, modes = [], [], [], [], [], 0.0, []
     for d in demos:
         if not usable(d):
             continue
+        style = getattr(d, "extra", {}).get("grasp_style")
+        modes.append(None if style is None else np.asarray(style, np.int64).reshape(-1))
         feats = np.asarray(d.obs["handle_features"][0], float)
         centre = feats[:3]
         ctx.append(context_features(feats, d.attrs["instruction"]))
@@ -77,8 +81,9 @@ def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:
         raise ValueError("no usable demonstrations (successful, with a located handle) to train on")
     length = np.asarray(lengths, np.int64)
     start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+    styles = np.concatenate(modes) if all(m is not None for m in modes) else None
     return DemoArrays(ctx=np.stack(ctx), steps=np.concatenate(steps), actions=np.concatenate(acts), start=start,
-                      length=length, max_time=max_time, cabinets=cabinets)
+                      length=length, max_time=max_time, cabinets=cabinets, modes=styles)
 
 
 def batch_indices(data: DemoArrays, demo_ids: np.ndarray, t: np.ndarray, config: BCConfig):
@@ -125,6 +130,9 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     adapter = ActionAdapter(hand, TaskConfig())
     t0 = time.perf_counter()
     data = demo_arrays(demos, adapter.finger_low, adapter.finger_high)
+    if config.modes and data.modes is None:
+        raise ValueError("the grasp-style token needs demonstrations that recorded their grasp styles "
+                         "(grasp_style): record them again with this opend-mj's `opend demos`")
     train_ids, val_ids = split_demos(data, val_fraction, config.seed)
     model = build_model(data.ctx.shape[1], data.steps.shape[1], data.actions.shape[1], config).to(device)
     train_rows = np.concatenate([np.arange(data.start[i], data.start[i] + data.length[i]) for i in train_ids])
@@ -137,6 +145,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: min(1.0, (s + 1) / warmup) * 0.5 * (1 + math.cos(math.pi * min(1.0, s / config.steps))))
     ctx_t, steps_t, acts_t = (torch.from_numpy(a).to(device) for a in (data.ctx, data.steps, data.actions))
+    modes_t = torch.from_numpy(data.modes).to(device) if config.modes else None
     mean_t, std_t = model.act_mean, model.act_std
     rng = np.random.default_rng([config.seed, 1])
     # samples drawn uniformly over the training demos' steps
@@ -150,9 +159,16 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
 
     def loss_of(rows):
         c, lag_rows, act_rows = (torch.from_numpy(r).to(device) for r in rows)
-        pred = model(ctx_t[c], steps_t[lag_rows])
         target = (acts_t[act_rows] - mean_t) / std_t
-        return (pred - target).abs().mean()
+        if modes_t is None:
+            return (model(ctx_t[c], steps_t[lag_rows]) - target).abs().mean()
+        style = modes_t[act_rows[:, 0]]  # the style at the sample's own step
+        known = style >= 0
+        pred, logits = model.predict(ctx_t[c], steps_t[lag_rows], mode=style.clamp(min=0))
+        loss = (pred - target).abs().mean()
+        if bool(known.any()):
+            loss = loss + config.mode_weight * torch.nn.functional.cross_entropy(logits[known], style[known])
+        return loss
 
     val_rng_state = np.random.default_rng([config.seed, 2])
     val_rows = None

@@ -53,7 +53,7 @@ class Approach(Stage):
             target = target + np.asarray(cfg.first_grasp_offset, float)
         axis = g.axis
         pre_pos = target - cfg.pregrasp_distance * axis
-        self.ctx.enter(result, "approach", site_target=target.tolist(), attempt=g.attempt)
+        self.ctx.enter(result, "approach", site_target=target.tolist(), attempt=g.attempt, style=g.style)
         site0, _ = robot.site_pose()
         if from_here:
             ahead = float((site0 - pre_pos) @ axis)

@@ -331,7 +331,7 @@ class Planner(Stage):
                 state.quat0 = unyawed(door, state, quat, ang)  # so that the pull's yaw starts at it
             moved = replace(moved, quat=quat, closed=np.array(targets(), float))
         self.state.taken_over = {"turned_deg": round(motion.angle_deg, 1), "slid": round(motion.distance, 4),
-                                 "held": held}
+                                 "held": held, "style": moved.style}
         result.events.append({"taken_over": self.state.taken_over})
         return moved, held
 
