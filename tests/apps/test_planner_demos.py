@@ -367,3 +367,36 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output
     assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log
+
+
+def test_grasp_style_token_trains_and_acts(demos_file, small_dataset, tmp_path):
+    """Demos record the planner's grasp style at every step; `--grasp-token` trains a policy whose
+    style head predicts it (cross-entropy beside the actions' L1), and the policy acts as an agent."""
+    import torch
+
+    from opend_mj.apps.demos import read_demos
+    from opend_mj.policy.learned.bc import GRASP_STYLES, load_policy
+
+    out, _ = demos_file
+    _, demos = read_demos(out)
+    for d in demos:
+        styles = d.extra["grasp_style"]
+        assert styles.shape == (d.num_samples,) and styles.min() >= -1 and styles.max() < len(GRASP_STYLES)
+        assert (styles >= 0).mean() > 0.9  # a style from the first approach on
+    ckpt = tmp_path / "token.pt"
+    result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(ckpt),
+                                       "--steps", "20", "--batch-size", "16", "--d-model", "16", "--grasp-token",
+                                       "--no-progress"])
+    assert result.exit_code == 0, result.output
+    model, config, _ = load_policy(ckpt)
+    assert config.modes == len(GRASP_STYLES)
+    ctx = torch.zeros(2, model.ctx_mean.numel())
+    steps = torch.zeros(2, len(config.lags), model.step_mean.numel())
+    actions, logits = model.predict(ctx, steps)
+    assert logits.shape == (2, len(GRASP_STYLES)) and actions.shape[:2] == (2, config.chunk)
+    results = tmp_path / "token.jsonl"
+    run = CliRunner().invoke(main, ["run", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka",
+                                    "--limit", "1", "--out", str(results), "--policy", "bc", "--policy-arg",
+                                    f"checkpoint={ckpt}"])
+    assert run.exit_code == 0, run.output
+    assert "error" not in results.read_text()
