@@ -96,19 +96,21 @@ expert-check: install
 
 ## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
 ## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
-## then its record on the generated test split. HAND=allegro DAGGER=2 SEEDS=2 STEPS=3000.
+## then its record on the generated test split. HAND=allegro DAGGER=2 SEEDS=2 STEPS=3000; BC_ARGS: more
+## `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 2
 SEEDS ?= 2
 STEPS ?= 3000
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
+BC_ARGS ?=
 train-bc: install assets
 	$(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) --solver oracle \
 		--workers $(WORKERS) --out $(BC_DIR)/demos.hdf5
 	$(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) --seed $(SEED) \
 		--dagger $(DAGGER) --cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --workers $(WORKERS) \
-		--out $(BC_DIR)/bc_$(HAND).pt
+		$(BC_ARGS) --out $(BC_DIR)/bc_$(HAND).pt
 	$(BIN)/opend run --policy bc --policy-arg checkpoint=$(BC_DIR)/bc_$(HAND).pt --hand $(HAND) --split test \
 		--cabinets $(CABINETS) --workers $(WORKERS) --out $(BC_DIR)/test.jsonl
 

@@ -211,7 +211,8 @@ def bundle_policy(checkpoints, out, ensemble_decay, routes):
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="JSON lines, one per takeover; appended to, resumable [results/expert/<lead>_<hand>_<split>.jsonl].")
 @click.option("--summary", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write the counts per lead, hand and switch as JSON (what `opend report` reads for real cabinets).")
+              help="Also write the counts per lead, hand and switch as JSON here (they are always written beside "
+                   "--out as .json: what `opend report` reads; for real cabinets keep only this).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True)
 @click.option("--progress/--no-progress", default=True)
 def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, out, summary, workers, progress):
@@ -238,11 +239,12 @@ def expert_check(hands, lead, lead_args, switches, split, cabinets_dir, limit, o
     keys = {(j.cabinet, j.joint, j.hand, j.seed) for j in jobs}
     records = [r for r in records if (r["cabinet"], r["joint"], r["hand"], r["seed"]) in keys]
     click.echo(f"{out}: ran {counts['ran']}, errors {counts['errors']}")
-    if summary is not None:
-        summary.parent.mkdir(parents=True, exist_ok=True)
-        command = "opend expert-check " + " ".join(sys.argv[2:])
-        summary.write_text(json.dumps(takeover_summary(records, command=command), indent=1) + "\n")
-        click.echo(f"summary -> {summary}")
+    command = "opend expert-check " + " ".join(sys.argv[2:])
+    for path in dict.fromkeys([out.with_suffix(".json"), summary]):  # beside the records, and where asked
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(takeover_summary(records, command=command), indent=1) + "\n")
+    click.echo(f"summary -> {summary or out.with_suffix('.json')}")
     for (who, switch), (s, n) in sorted(summarise_takeovers(records).items(), key=lambda kv: str(kv[0])):
         at = "all switches" if switch == "all" else f"switch {switch:g} s"
         click.echo(f"  {who}, {at}: {s}/{n} = {100.0 * s / max(n, 1):.1f} % opened")

@@ -243,11 +243,12 @@ def results_markdown(results_dir: Path) -> str:
 
 def expert_sections(results_dir: Path) -> list[str]:
     """The planner as an interactive expert (`opend expert-check`): episodes taken over mid-way, on
-    generated cabinets (results/expert/*.jsonl) and real ones (results/real/expert_*.json, counts only)."""
+    generated cabinets (results/expert/*.json, the summaries beside the records) and real ones
+    (results/real/expert_*.json, counts only)."""
     from opend_mj.evaluation.takeover import load_takeovers, takeover_markdown
 
     results_dir = Path(results_dir)
-    paths = sorted((results_dir / "expert").glob("*.jsonl")) + sorted((results_dir / "real").glob("expert_*.json"))
+    paths = sorted((results_dir / "expert").glob("*.json")) + sorted((results_dir / "real").glob("expert_*.json"))
     if not paths:
         return []
     out = ["## The planner as an interactive expert", "",
