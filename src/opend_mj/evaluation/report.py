@@ -116,8 +116,9 @@ RESULT_SETS = (
     # the shipped behaviour-cloning checkpoints (checkpoints/bc_<hand>.pt), one records file per hand
     ResultSet("bc-fasterrcnn", "Behaviour cloning", "bc/*_shipped_test.jsonl", "bc_all.json",
               "opend run --policy bc --hand HAND --split test",
-              "opend run --policy bc --hand HAND --split all --cabinets build/opend-train "
-              "--out build/real-results/bc_HAND_real.jsonl` per hand, then `opend score build/real-results/bc_*_real.jsonl"),
+              "opend run --policy bc --hand franka --hand allegro --hand shadow --hand skeleton --split all "
+              "--cabinets build/opend-train --workers 2 --out build/real-results/bc_real.jsonl` then "
+              "`opend score build/real-results/bc_real.jsonl"),
 )
 #: Generated-split conditions reported below the main table: (file, what it varies).
 CONDITIONS = (
