@@ -403,29 +403,6 @@ def test_a_depth_proposal_fills_a_missed_detection():
     assert select_handle(empty, None, "drawer") is None
 
 
-def test_under_depth_noise_a_detection_depth_cannot_confirm_is_a_candidate():
-    """Three stacked drawers, depth-verified: the bottom drawer's bar is too far and thin for depth to
-    propose it in a noisy image. With exact depth only what depth proposes is a candidate ("bottom
-    drawer" is the lower of the two proposed); under noise (read from the image) the confident
-    detection joins, so "bottom drawer" is the bottom one."""
-    from opend_mj.policy.learned.detector import MatchConfig, select_handle
-    from opend_mj.policy.learned.detector.solver import depth_noise
-
-    boxes = [_box(128, 60), _box(128, 105), _box(128, 150)]
-    found = _detections(boxes, [0.95, 0.9, 0.92], [[0.9, 0.1]] * 3)
-    proposals = _detections(boxes[:2], [0.9, 0.9], [[0.9, 0.1]] * 2)
-    cfg = MatchConfig()
-    assert np.allclose(select_handle(found, proposals, "bottom drawer", config=cfg)[0], boxes[1])
-    assert np.allclose(select_handle(found, proposals, "bottom drawer", config=cfg, noise=0.004)[0], boxes[2])
-    off = MatchConfig(noisy_detections=False)
-    assert np.allclose(select_handle(found, proposals, "bottom drawer", config=off, noise=0.004)[0], boxes[1])
-    # the noise is read from the image: none in an exact one, its sigma in a noisy one
-    rng = np.random.default_rng(0)
-    flat = np.full((64, 64), 2.0) + np.linspace(0.0, 0.1, 64)[None]
-    assert depth_noise(flat) == 0.0
-    assert depth_noise(flat + rng.normal(0.0, 0.005, flat.shape)) == pytest.approx(0.005, rel=0.15)
-
-
 def test_a_one_class_rgb_detector_seeds_a_two_kind_rgbd_one(tmp_path):
     """Fine-tuning start: every tensor of the parent is used; the new depth input starts at zero and
     each kind row starts as the parent's handle row."""

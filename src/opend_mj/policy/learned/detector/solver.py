@@ -32,11 +32,6 @@ class MatchConfig:
     #: ones, while its drawer / door call on a box that depth proposes holds (chosen on the real
     #: train part of the OpenD training cabinets and the procedural train split).
     depth_verified: bool = True
-    #: Under depth noise (read from the image: `perception.noise.pixel_noise`), detections above
-    #: ``threshold`` that no depth proposal covers are candidates too: a proposal needs a pixel three
-    #: sigmas proud, and a far, thin bar's protrusion is less than that in a noisy image, so depth
-    #: can no longer confirm it (exact depth reads no noise: nothing changes there).
-    noisy_detections: bool = True
     #: With a kinds detector, read the kind calls together with the instruction
     #: (:func:`consistent_choice`) before falling back to the kind threshold and Algorithm 1's
     #: nearest rank. ``handle_weight``: the exponent of the handle probability in the probability
@@ -104,15 +99,14 @@ def vertical_bar_prior(boxes: np.ndarray, kind: np.ndarray, door_odds: float, as
 
 def select_handle(found: Detections, proposals: Detections | None, instruction: str, depth=None,
                   camera_view=None, config: MatchConfig = MatchConfig(),
-                  observed: tuple = (), noise: float = 0.0) -> tuple[np.ndarray, float] | None:
+                  observed: tuple = ()) -> tuple[np.ndarray, float] | None:
     """(box, handle probability) of the handle the instruction names, or None without candidates.
 
     Candidates: detections above ``threshold``, plus depth proposals no detection covers that the
     head calls handles; with a kinds detector, those of the instructed kind (all of them where none
     is); Algorithm 1 (:func:`match_instruction`) picks among them. ``observed``: (box, kind) pairs
     of handles whose kind the robot saw by moving them (:func:`apply_observed_kinds`); their calls
-    are certain. ``noise``: the depth image's noise (m, one sigma; 0 for exact depth), see
-    ``MatchConfig.noisy_detections``."""
+    are certain."""
     keep = found.handle >= config.threshold
     boxes, handle, kind = found.boxes[keep], found.handle[keep], found.kind[keep]
     if config.depth_verified and proposals is not None and len(proposals.boxes):
@@ -125,12 +119,7 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
                 j = j[np.argmax(covering_handle[j])]
                 handle[i], kind[i] = max(handle[i], covering_handle[j]), covering_kind[j]
         add = handle >= config.proposal_threshold
-        unconfirmed = np.zeros(len(covering), bool)
-        if noise > 0.0 and config.noisy_detections and len(covering):
-            unconfirmed = ~centres_overlap(covering, proposals.boxes).any(1)
-        boxes = np.concatenate([proposals.boxes[add], covering[unconfirmed]])
-        handle = np.concatenate([handle[add], covering_handle[unconfirmed]])
-        kind = np.concatenate([kind[add], covering_kind[unconfirmed]])
+        boxes, handle, kind = proposals.boxes[add], handle[add], kind[add]
     elif config.use_proposals and proposals is not None and len(proposals.boxes):
         add = proposals.handle >= config.proposal_threshold
         if len(boxes):
@@ -167,15 +156,6 @@ def confirmed(boxes: np.ndarray, found: Detections, threshold: float) -> np.ndar
     if not len(boxes) or not len(sure):
         return np.zeros(len(boxes), bool)
     return centres_overlap(boxes, sure).any(1)
-
-
-def depth_noise(depth) -> float:
-    """A depth image's noise (m, one sigma; 0 for exact depth), read from the image itself."""
-    from opend_mj.policy.perception import PerceptionConfig
-    from opend_mj.policy.perception.noise import pixel_noise
-
-    d = np.asarray(depth, float)
-    return pixel_noise(d, np.isfinite(d) & (d > 0), PerceptionConfig().noise_floor)
 
 
 class FasterRCNNSolver:
@@ -223,9 +203,8 @@ class FasterRCNNSolver:
             held = np.concatenate([np.ones(len(extra), bool), confirmed(thin, found, self.match.thin_threshold)])
             scored = Detections(scored.boxes[held], scored.handle[held], scored.kind[held])
             extra = scored.boxes
-        noise = depth_noise(depth) if self.match.noisy_detections and depth is not None else 0.0
         chosen = select_handle(found, scored if extra is not None else None, instruction, depth, camera_view,
-                               self.match, observed=tuple(observed), noise=noise)
+                               self.match, observed=tuple(observed))
         if chosen is None:
             return None
         b, score = chosen
