@@ -43,6 +43,10 @@ class Rollout:
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"DAgger beta must be within [0, 1], not {self.beta}")
 
+    def episode(self, job, env, config) -> tuple[dict, object]:
+        """One episode of this round (:func:`rollout_episode`)."""
+        return rollout_episode(job, env, config)
+
 
 @dataclass(frozen=True)
 class DaggerConfig:

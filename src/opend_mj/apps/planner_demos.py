@@ -266,10 +266,8 @@ def _record_group(args) -> list[tuple[dict, Demo | None]]:
     for job in jobs:
         try:
             env = env or make_episode_env(job)
-            if config.rollout is not None:
-                from opend_mj.apps.dagger import rollout_episode
-
-                line, demo = rollout_episode(job, env, config)
+            if config.rollout is not None:  # a DAgger round (`apps.dagger.Rollout`)
+                line, demo = config.rollout.episode(job, env, config)
                 line["kept"] = demo is not None
                 out.append((line, demo))
                 continue
