@@ -1,5 +1,5 @@
-"""results/ holds what `make results`, `make eval-real`, `opend robustness` and `opend report` write or read,
-nothing else."""
+"""results/ holds what `make results`, `make eval-real`, `opend robustness`, `opend expert-check` and `opend report`
+write or read, nothing else."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ def unexplained_results(results: Path, makefile_text: str) -> list[str]:
     """Files under ``results`` that `opend report` does not read and whose name the Makefile does not
     write (a plot counts as written where its records are); hidden files and the git-ignored
     `results/quickstart/` are left out."""
-    from opend_mj.evaluation.report import CONDITIONS, RESULT_SETS, ROBUSTNESS_RESULTS
+    from opend_mj.evaluation.report import CONDITIONS, EXPERT_RESULTS, RESULT_SETS, ROBUSTNESS_RESULTS
 
     read = [rs.generated for rs in RESULT_SETS] + [f"real/{rs.real}" for rs in RESULT_SETS]
-    read += [name for name, _ in CONDITIONS] + list(ROBUSTNESS_RESULTS)
+    read += [name for name, _ in CONDITIONS] + list(ROBUSTNESS_RESULTS) + list(EXPERT_RESULTS)
     out = []
     for path in sorted(results.rglob("*")):
         rel = path.relative_to(results).as_posix()

@@ -249,7 +249,7 @@ def expert_sections(results_dir: Path) -> list[str]:
     from opend_mj.evaluation.takeover import load_takeovers, takeover_markdown
 
     results_dir = Path(results_dir)
-    paths = sorted((results_dir / "expert").glob("*.json")) + sorted((results_dir / "real").glob("expert_*.json"))
+    paths = [p for pattern in EXPERT_RESULTS for p in sorted(results_dir.glob(pattern + ".json"))]
     if not paths:
         return []
     out = ["## The planner as an interactive expert", "",
@@ -264,6 +264,9 @@ def expert_sections(results_dir: Path) -> list[str]:
 #: What `opend robustness` writes under results/ (`make robustness`, `make robustness-real`): its records,
 #: tables and plots; the report reads the tables (``*.json``).
 ROBUSTNESS_RESULTS = ("robustness/*", "real/robustness_*")
+#: What `opend expert-check` writes under results/ (`make expert-check`; docs/demonstrations.md): its records
+#: and their summaries on generated cabinets, the summaries only on real ones; the report reads the summaries.
+EXPERT_RESULTS = ("expert/*", "real/expert_*")
 
 
 def robustness_sections(results_dir: Path) -> list[str]:
