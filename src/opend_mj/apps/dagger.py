@@ -75,7 +75,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     line, the labelled demonstration or None where the policy found no handle)."""
     from opend_mj.apps.demos import Demo, _episode_json, env_args
     from opend_mj.apps.planner_demos import noise_seed
-    from opend_mj.evaluation.agents import load_agent
+    from opend_mj.evaluation.agents import PROTOCOL_TIME_LIMIT, load_agent
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for
     from opend_mj.evaluation.takeover import agent_info
     from opend_mj.policy.expert import PlannerExpert
@@ -104,9 +104,9 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
             first = Observation(rgb=rgb, depth=depth, instruction=task.instruction, camera_view=task.camera_view(physics))
             expert = PlannerExpert(env, first, cam)
             agent.reset(agent_info(job, env, reader))
-            obs = {**reader.proprio(), "instruction": task.instruction, **reader.camera_arrays(), "rgb": rgb,
-                   "depth": depth}
-            max_steps = int(round(15.0 / task.control_timestep))
+            camera = reader.camera_arrays()  # the camera does not move within an episode
+            obs = {**reader.proprio(), "instruction": task.instruction, **camera, "rgb": rgb, "depth": depth}
+            max_steps = int(round(PROTOCOL_TIME_LIMIT / task.control_timestep))
             try:
                 for _ in range(max_steps):
                     proprio = reader.proprio()
@@ -124,7 +124,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
                     executed.append(sent)
                     if env.step(sent).last():
                         raise PhysicsDiverged(f"physics instability: {task.physics_warnings}")
-                    obs = {**reader.proprio(), "instruction": task.instruction, **reader.camera_arrays()}
+                    obs = {**reader.proprio(), "instruction": task.instruction, **camera}
             except PhysicsDiverged:
                 why = "physics"
             finally:

@@ -65,12 +65,12 @@ def takeover_episode(job: EpisodeJob, lead, switch: float, env=None, expert_conf
                 act = lead_expert.action
             else:
                 lead.reset(agent_info(job, env, reader))
-                obs0 = {**reader.proprio(), "instruction": task.instruction, **reader.camera_arrays(),
-                        "rgb": rgb, "depth": first.depth}
+                camera = reader.camera_arrays()  # the camera does not move within an episode
+                obs0 = {**reader.proprio(), "instruction": task.instruction, **camera, "rgb": rgb, "depth": first.depth}
 
                 def act(obs=[obs0]):  # noqa: B006 (the first observation, then the hand's own state)
                     action = lead.act(obs[0])
-                    obs[0] = {**reader.proprio(), "instruction": task.instruction, **reader.camera_arrays()}
+                    obs[0] = {**reader.proprio(), "instruction": task.instruction, **camera}
                     return action
             while steps < max_steps:
                 if at_switch is None and physics.data.time >= switch - 1e-9:
@@ -151,7 +151,9 @@ def check_expert(jobs: list[EpisodeJob], out: Path, lead: str = PLANNER_LEAD, le
     ``out``; resumable (takeovers already in ``out`` are skipped). Returns counts."""
     from tqdm import tqdm
 
+    from opend_mj.backends import make_executor
     from opend_mj.evaluation.jobs import group_jobs
+    from opend_mj.evaluation.runner import error_reason
 
     out = Path(out)
     done = set()
@@ -182,17 +184,13 @@ def check_expert(jobs: list[EpisodeJob], out: Path, lead: str = PLANNER_LEAD, le
             f.flush()
             bar.set_postfix(success=f"{counts['success']}/{counts['ran']}")
 
-        if workers <= 1:
-            for g in groups:
-                take(_takeover_group(g))
-        else:
-            import multiprocessing as mp
-
-            from opend_mj.evaluation.pool import _worker_init
-
-            with mp.get_context("spawn").Pool(workers, initializer=_worker_init) as pool:
-                for records in pool.imap_unordered(_takeover_group, groups):
-                    take(records)
+        with make_executor("local", workers) as executor:
+            for (group, *_), records, error in executor.imap_unordered(_takeover_group, groups):
+                if error is not None:  # the worker itself failed: every takeover of the group is an error record
+                    records = [{"cabinet": j.cabinet, "joint": j.joint, "hand": j.hand, "seed": j.seed,
+                                "lead_spec": lead, "switch": s, "success": False, "error": error_reason(error)}
+                               for j in group for s in switches]
+                take(records)
     bar.close()
     return counts
 

@@ -119,6 +119,12 @@ class PlannerExpert:
         self._label = None  # (action, site target) of the plan's latest step
         self._age = 0  # steps the current plan has run
         self._panel_x: float | None = None
+        spec = env.action_spec()
+        self._finger_span = np.maximum(spec.maximum[7:] - spec.minimum[7:], 1e-9)  # actuator ranges
+        bound = self.physics.bind(self.task.cabinet.joint_element(self.task.target.joint))
+        hinge = int(self.physics.model.jnt_type[int(bound.element_id)]) == 3  # mjJNT_HINGE
+        #: ``part_moved`` in the part's joint units (m, or rad for a hinge)
+        self._open_step = float(np.radians(config.part_moved_deg)) if hinge else config.part_moved
 
     # ---------------------------------------------------------------- the coroutine
     def _hand_over(self, message):
@@ -215,9 +221,7 @@ class PlannerExpert:
         if self._opened() - self._opened_at_start > self._open_step:
             return True  # the part the plan approaches was opened further (by another agent)
         robot = self._robot_view()
-        spec = self.env.action_spec()
-        low, high = spec.minimum[7:], spec.maximum[7:]
-        apart = np.abs(np.asarray(robot.finger_qpos(), float) - action[7:]) / np.maximum(high - low, 1e-9)
+        apart = np.abs(np.asarray(robot.finger_qpos(), float) - action[7:]) / self._finger_span
         return float(np.mean(apart)) > 0.25 and self._planner.approach.holding(robot)[0]
 
     def _opened(self) -> float:
@@ -225,12 +229,6 @@ class PlannerExpert:
         target = self.task.target
         return float(target.open_sign * (self.task.cabinet.joint_values(self.physics)[target.joint] - target.closed))
 
-    @property
-    def _open_step(self) -> float:
-        """``part_moved`` in the part's joint units (m, or rad for a hinge)."""
-        bound = self.physics.bind(self.task.cabinet.joint_element(self.task.target.joint))
-        hinge = int(self.physics.model.jnt_type[int(bound.element_id)]) == 3
-        return float(np.radians(self.config.part_moved_deg)) if hinge else self.config.part_moved
 
     def _robot_view(self) -> Robot:
         if getattr(self, "_reader", None) is None:
