@@ -181,7 +181,6 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     ``folder/dagger.json``): per round, the data it trained on and its validation success."""
     from dataclasses import replace
 
-    from opend_mj.apps.demos import read_demos  # noqa: F401 (the demos' format check, through load_training_demos)
     from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, record_demos
     from opend_mj.evaluation.jobs import make_jobs
     from opend_mj.evaluation.pool import run_jobs

@@ -119,6 +119,7 @@ class PlannerExpert:
         self._label = None  # (action, site target) of the plan's latest step
         self._age = 0  # steps the current plan has run
         self._panel_x: float | None = None
+        self._reader = Robot(env)  # reads the hand's state for the expert's own checks
         spec = env.action_spec()
         self._finger_span = np.maximum(spec.maximum[7:] - spec.minimum[7:], 1e-9)  # actuator ranges
         bound = self.physics.bind(self.task.cabinet.joint_element(self.task.target.joint))
@@ -229,10 +230,8 @@ class PlannerExpert:
         target = self.task.target
         return float(target.open_sign * (self.task.cabinet.joint_values(self.physics)[target.joint] - target.closed))
 
-
     def _robot_view(self) -> Robot:
-        if getattr(self, "_reader", None) is None:
-            self._reader = Robot(self.env)
+        """The hand's own state, read as the planner reads it (site, fingers, touch)."""
         return self._reader
 
     def action(self) -> np.ndarray | None:
