@@ -96,10 +96,10 @@ expert-check: install
 
 ## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
 ## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
-## then its record on the generated test split. HAND=allegro DAGGER=2 SEEDS=2 STEPS=3000; BC_ARGS: more
+## then its record on the generated test split. HAND=allegro DAGGER=3 SEEDS=2 STEPS=3000; BC_ARGS: more
 ## `opend train-policy` options (--grasp-token).
 HAND ?= allegro
-DAGGER ?= 2
+DAGGER ?= 3
 SEEDS ?= 2
 STEPS ?= 3000
 SEED ?= 0
