@@ -400,26 +400,3 @@ def test_grasp_style_token_trains_and_acts(demos_file, small_dataset, tmp_path):
                                     f"checkpoint={ckpt}"])
     assert run.exit_code == 0, run.output
     assert "error" not in results.read_text()
-
-
-def test_held_memory_policy_trains_and_acts(demos_file, small_dataset, tmp_path):
-    """`--held-memory` trains a policy whose step inputs end with the held-handle memory, and the
-    policy acts as an agent."""
-    from opend_mj.policy.learned.bc import HELD_DIM, load_policy
-
-    out, _ = demos_file
-    plain, ckpt = tmp_path / "plain.pt", tmp_path / "held.pt"
-    for path, extra in ((plain, []), (ckpt, ["--held-memory"])):
-        result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(path),
-                                           "--steps", "10", "--batch-size", "16", "--d-model", "16", "--no-progress",
-                                           *extra])
-        assert result.exit_code == 0, result.output
-    model, config, _ = load_policy(ckpt)
-    assert config.held_memory
-    assert model.step_mean.numel() == load_policy(plain)[0].step_mean.numel() + HELD_DIM
-    results = tmp_path / "held.jsonl"
-    run = CliRunner().invoke(main, ["run", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka",
-                                    "--limit", "1", "--out", str(results), "--policy", "bc", "--policy-arg",
-                                    f"checkpoint={ckpt}"])
-    assert run.exit_code == 0, run.output
-    assert "error" not in results.read_text()

@@ -73,27 +73,3 @@ def test_percept_gives_a_doors_hinge_line_relative_to_the_handle():
     assert np.allclose(door[-3:], [0.02, 0.35, 1.0])
     assert np.allclose(door[:3], handle.centre)
     assert np.array_equal(door[:11], drawer[:11]) and np.array_equal(door[14:22], drawer[14:22])  # but the side
-
-
-def test_held_memory_remembers_where_the_hand_let_go():
-    """The held-handle memory: where the grasp site last touched something, how long ago (s, capped)
-    and whether it ever did; computed in one call or step by step (as the agent does), alike."""
-    from opend_mj.policy.learned.bc import HELD_HORIZON, HELD_TOUCH, held_memory
-
-    n = 8
-    times = np.arange(n, dtype=float)[:, None] / 60.0
-    site = np.stack([np.linspace(0.0, 0.7, n), np.zeros(n), np.full(n, 1.0)], axis=1)
-    touch = np.zeros((n, 4))
-    touch[2:5, 0] = HELD_TOUCH * 4  # holds at steps 2-4, lets go at 5
-    obs = {"touch": touch, "grasp_site_pos": site, "time": times}
-    centre = np.array([0.0, 0.0, 1.0])
-    rows, _ = held_memory(obs, centre)
-    assert rows.shape == (n, 5)
-    assert (rows[:2, 4] == 0).all() and np.allclose(rows[:2, 3], HELD_HORIZON)  # never held yet
-    assert np.allclose(rows[5:, :3], site[4] - centre)  # where it let go, kept after
-    assert np.allclose(rows[7, 3], 3 / 60.0) and rows[2, 3] == 0 and (rows[2:, 4] == 1).all()
-    last, stepped = None, []
-    for i in range(n):
-        row, last = held_memory({k: v[i:i + 1] for k, v in obs.items()}, centre, last)
-        stepped.append(row[0])
-    assert np.allclose(np.asarray(stepped), rows)

@@ -78,9 +78,6 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--lr", type=float, default=None, help="[1e-3]")
 @click.option("--chunk", type=click.IntRange(min=1), default=None, help="Actions per prediction [20].")
 @click.option("--d-model", type=click.IntRange(min=8), default=None, help="Transformer width [64].")
-@click.option("--held-memory/--no-held-memory", default=False, show_default=True,
-              help="The held-handle memory: the step inputs also carry where the hand last touched "
-                   "something and how long ago.")
 @click.option("--grasp-token/--no-grasp-token", default=False, show_default=True,
               help="The grasp-style token: a head predicts the expert's grasp style at each step and the actions "
                    "are conditioned on it (needs demos that recorded grasp_style).")
@@ -108,7 +105,7 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
-def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, held_memory, grasp_token, kind, seed, threads,
+def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, threads,
                  device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, val_targets,
                  workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
@@ -120,8 +117,6 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
 
     changes = {k: v for k, v in dict(steps=steps, batch_size=batch_size, lr=lr, chunk=chunk, d_model=d_model).items()
                if v is not None}
-    if held_memory:
-        changes["held_memory"] = True
     if grasp_token:
         from opend_mj.policy.learned.bc import GRASP_STYLES
 

@@ -25,14 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import (
-    checkpoint_paths,
-    context_features,
-    decode_action,
-    held_memory,
-    load_policies,
-    step_features,
-)
+from opend_mj.policy.learned.bc import checkpoint_paths, context_features, decode_action, load_policies, step_features
 
 
 def default_checkpoint(hand: str) -> Path:
@@ -114,7 +107,6 @@ class BCAgent:
         self._ctx = None  # one context per member
         self._centre = None
         self._steps: list[np.ndarray] = []
-        self._held = None  # the held-handle memory's state (bc.held_memory)
         self._preds: list[np.ndarray] = []  # prediction made at step i (chunk, A), kept while it covers a step
         self.percept = None
         self.stopped = None
@@ -141,11 +133,7 @@ class BCAgent:
             return None
         one = {k: np.asarray(obs[k], float)[None] for k in ("grasp_site_pos", "grasp_site_quat", "mocap_pos",
                                                             "mocap_quat", "root_vel", "hand_qpos", "touch", "time")}
-        row = step_features(one, self._centre)[0]
-        if self.config.held_memory:
-            memory, self._held = held_memory(one, self._centre, self._held)
-            row = np.concatenate([row, memory[0]])
-        self._steps.append(row)
+        self._steps.append(step_features(one, self._centre)[0])
         t = len(self._steps) - 1
         rows = [max(t - lag, 0) for lag in self.config.lags]
         steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]

@@ -75,9 +75,6 @@ class BCConfig:
     #: (the true style in training, the predicted one when acting)
     modes: int = 0
     mode_weight: float = 0.1  # the style's cross-entropy beside the actions' L1 in the loss
-    #: the held-handle memory (:func:`held_memory`): where the grasp site last touched something and
-    #: how long ago, so that a hand that has let go of a part that moved knows where it was
-    held_memory: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -213,38 +210,6 @@ def step_features(obs: dict, centre) -> np.ndarray:
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
-#: N: total touch above which the hand is taken to hold (or push) something (a held handle reads tens of N)
-HELD_TOUCH = 5.0
-#: s: the age at which the held-handle memory's "seconds since" saturates
-HELD_HORIZON = 5.0
-#: Length of :func:`held_memory`'s rows.
-HELD_DIM = 5
-
-
-def held_memory(obs: dict, centre, last=None) -> tuple[np.ndarray, tuple | None]:
-    """(T, 5) memory rows of T consecutive observations and the state to carry to the next call:
-    the grasp site's position (relative to ``centre``, m) at the latest step up to each one at which
-    the fingers touched something (total touch above :data:`HELD_TOUCH`), the seconds since then
-    (capped at :data:`HELD_HORIZON`) and whether there was such a step (zeros and 0 before the
-    first). ``last``: the state a previous call returned ((position, time) or None)."""
-    touch = np.asarray(obs["touch"], float)
-    site = np.asarray(obs["grasp_site_pos"], float)
-    times = np.asarray(obs["time"], float).reshape(len(site), -1)[:, 0]
-    held = touch.reshape(len(site), -1).sum(axis=1) > HELD_TOUCH
-    rows = np.zeros((len(site), HELD_DIM), np.float32)
-    c = np.asarray(centre, float)
-    for i in range(len(site)):
-        if held[i]:
-            last = (site[i] - c, float(times[i]))
-        if last is not None:
-            rows[i, :3] = last[0]
-            rows[i, 3] = min(HELD_HORIZON, float(times[i]) - last[1])
-            rows[i, 4] = 1.0
-        else:
-            rows[i, 3] = HELD_HORIZON
-    return rows, last
-
-
 def lag_index(t: np.ndarray, lags) -> np.ndarray:
     """(N, L) indices of the steps ``lags`` before steps ``t`` (the first step where there is none)."""
     return np.maximum(np.asarray(t)[:, None] - np.asarray(lags)[None, :], 0)
@@ -340,7 +305,7 @@ ENSEMBLE_FORMAT = "opend-bc-ensemble"
 #: inputs (the context may differ in length: checkpoints of before the hinge line read fewer percept numbers).
 _MEMBER_KEYS = ("hand", "finger_low", "finger_high")
 _MEMBER_DIMS = ("step", "act")
-_MEMBER_CONFIG = ("chunk", "lags", "held_memory")
+_MEMBER_CONFIG = ("chunk", "lags")
 
 
 def checkpoint_paths(spec) -> list:
@@ -456,5 +421,5 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
 
 
 __all__ = ["BCConfig", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
-           "decode_action", "encode_actions", "held_memory", "hinge_line", "lag_index", "load_policy", "perceive_handle",
+           "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
            "percept_vector", "quat_from_rot6", "rot6", "step_features"]

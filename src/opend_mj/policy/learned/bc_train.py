@@ -23,7 +23,6 @@ from opend_mj.policy.learned.bc import (
     build_model,
     context_features,
     encode_actions,
-    held_memory,
     lag_index,
     step_features,
 )
@@ -61,10 +60,9 @@ def usable(demo) -> bool:
     return wanted and len(demo.actions) > 0 and bool(np.isfinite(feats[0]).all())
 
 
-def demo_arrays(demos, finger_low, finger_high, memory: bool = False) -> DemoArrays:
+def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:
     """The samples of the usable demos (see :func:`usable`); ``modes`` where every one recorded its
-    grasp styles (``grasp_style``, `opend demos`); ``memory``: the step features end with the
-    held-handle memory (`bc.held_memory`)."""
+    grasp styles (``grasp_style``, `opend demos`)."""
     ctx, steps, acts, lengths, cabinets, max_time, modes = [], [], [], [], [], 0.0, []
     for d in demos:
         if not usable(d):
@@ -74,8 +72,7 @@ def demo_arrays(demos, finger_low, finger_high, memory: bool = False) -> DemoArr
         feats = np.asarray(d.obs["handle_features"][0], float)
         centre = feats[:3]
         ctx.append(context_features(feats, d.attrs["instruction"]))
-        feats_t = step_features(d.obs, centre)
-        steps.append(np.concatenate([feats_t, held_memory(d.obs, centre)[0]], axis=1) if memory else feats_t)
+        steps.append(step_features(d.obs, centre))
         acts.append(encode_actions(d.actions, centre, finger_low, finger_high))
         lengths.append(len(d.actions))
         cabinets.append(str(d.attrs.get("cabinet", "")))
@@ -132,7 +129,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     torch.manual_seed(config.seed)
     adapter = ActionAdapter(hand, TaskConfig())
     t0 = time.perf_counter()
-    data = demo_arrays(demos, adapter.finger_low, adapter.finger_high, memory=config.held_memory)
+    data = demo_arrays(demos, adapter.finger_low, adapter.finger_high)
     if config.modes and data.modes is None:
         raise ValueError("the grasp-style token needs demonstrations that recorded their grasp styles "
                          "(grasp_style): record them again with this opend-mj's `opend demos`")
