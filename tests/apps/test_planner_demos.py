@@ -358,6 +358,9 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     assert [r["round"] for r in summary["rounds"]] == [0, 1]
     assert all(r["val_episodes"] == 1 and 0.0 <= r["val_success"] <= 100.0 for r in summary["rounds"])
     assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
+    chosen = summary["rounds"][summary["chosen"]]  # the shipped policy: the best on validation
+    assert chosen["val_success"] == max(r["val_success"] for r in summary["rounds"])
+    assert (tmp_path / "bc.pt").read_bytes() == Path(chosen["checkpoint"]).read_bytes()
     _, rollouts = read_demos(folder / "round_1.hdf5")
     _, val = split_cabinets(make_jobs(small_dataset, ["franka"], "oracle", split="train"), 0.15, 0)
     assert rollouts and all(d.attrs["labels"] == "expert" and d.attrs["cabinet"] not in val for d in rollouts)
@@ -367,6 +370,14 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output
     assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log
+
+
+def test_best_round_is_the_best_on_validation_and_the_later_on_a_tie():
+    from opend_mj.apps.dagger import best_round
+
+    rounds = [{"round": 0, "val_success": 40.0}, {"round": 1, "val_success": 70.0}, {"round": 2, "val_success": 65.0}]
+    assert best_round({"rounds": rounds})["round"] == 1
+    assert best_round({"rounds": rounds + [{"round": 3, "val_success": 70.0}]})["round"] == 3
 
 
 def test_grasp_style_token_trains_and_acts(demos_file, small_dataset, tmp_path):

@@ -174,6 +174,12 @@ def split_cabinets(jobs, share: float, seed: int) -> tuple[set, set]:
     return set(cabinets) - val, val
 
 
+def best_round(summary: dict) -> dict:
+    """The round whose policy to ship: the highest validation success, the later round on a tie
+    (it trained on more of the policy's own states)."""
+    return max(summary["rounds"], key=lambda r: (r["val_success"], r["round"]))
+
+
 def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_config, config: DaggerConfig = DaggerConfig(),
                workers: int = 1, threads: int = 1, progress: bool = True, log=print, solver: str = "fasterrcnn") -> dict:
     """DAgger from ``demo_files`` (the planner's demonstrations of ``hand``) on the training split of
@@ -233,4 +239,4 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     return summary
 
 
-__all__ = ["DaggerConfig", "Rollout", "rollout_episode", "run_dagger", "split_cabinets"]
+__all__ = ["DaggerConfig", "Rollout", "best_round", "rollout_episode", "run_dagger", "split_cabinets"]

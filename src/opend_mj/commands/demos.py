@@ -142,11 +142,12 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
 
 
 def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, folder, workers, threads, progress) -> None:
-    """`opend train-policy --dagger`: the DAgger rounds, then the last round's checkpoint copied to ``out``."""
+    """`opend train-policy --dagger`: the DAgger rounds, then the checkpoint of the round with the best
+    validation success (`apps.dagger.best_round`) copied to ``out``."""
     import json
     import shutil
 
-    from opend_mj.apps.dagger import run_dagger
+    from opend_mj.apps.dagger import best_round, run_dagger
     from opend_mj.apps.demos import DemoFileError
 
     folder = folder or Path("build/dagger") / hand
@@ -155,13 +156,16 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
                              threads=threads, progress=progress, log=click.echo)
     except (ValueError, FileNotFoundError, DemoFileError) as exc:
         raise click.ClickException(str(exc)) from exc
-    last = Path(summary["rounds"][-1]["checkpoint"])
+    chosen = best_round(summary)
+    best = Path(chosen["checkpoint"])
     out.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(last, out)
-    trained = json.loads(last.with_suffix(".json").read_text())
-    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
+    shutil.copyfile(best, out)
+    trained = json.loads(best.with_suffix(".json").read_text())
+    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": {**summary, "chosen": chosen["round"]}},
+                                                   indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
-                                                           for r in summary["rounds"]) + f" -> {out}")
+                                                           for r in summary["rounds"])
+               + f"; round {chosen['round']}'s policy -> {out}")
 
 
 @click.command("bundle-policy")
