@@ -96,12 +96,14 @@ expert-check: install
 
 ## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
 ## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
-## then its record on the generated test split. HAND=allegro DAGGER=3 SEEDS=2 STEPS=3000; BC_ARGS: more
+## then its record on the generated test split. HAND=allegro DAGGER=3 SEEDS=2 STEPS=3000 (each round's
+## training) FINAL_STEPS=9000 (the last round's, whose policy is shipped); BC_ARGS: more
 ## `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3
 SEEDS ?= 2
 STEPS ?= 3000
+FINAL_STEPS ?= 9000
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
 BC_ARGS ?=
@@ -109,7 +111,8 @@ train-bc: install assets
 	$(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) --solver oracle \
 		--workers $(WORKERS) --out $(BC_DIR)/demos.hdf5
 	$(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) --seed $(SEED) \
-		--dagger $(DAGGER) --cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --workers $(WORKERS) \
+		--dagger $(DAGGER) --final-steps $(FINAL_STEPS) --cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger \
+		--workers $(WORKERS) \
 		$(BC_ARGS) --out $(BC_DIR)/bc_$(HAND).pt
 	$(BIN)/opend run --policy bc --policy-arg checkpoint=$(BC_DIR)/bc_$(HAND).pt --hand $(HAND) --split test \
 		--cabinets $(CABINETS) --workers $(WORKERS) --out $(BC_DIR)/test.jsonl

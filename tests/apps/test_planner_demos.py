@@ -351,13 +351,15 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     folder = tmp_path / "dagger"
     args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "20",
             "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
-            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--no-progress"]
+            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--final-steps", "30", "--no-progress"]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     summary = json.loads((tmp_path / "bc.json").read_text())["dagger"]
     assert [r["round"] for r in summary["rounds"]] == [0, 1]
     assert all(r["val_episodes"] == 1 and 0.0 <= r["val_success"] <= 100.0 for r in summary["rounds"])
     assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
+    steps = [json.loads((folder / f"policy_{i}.json").read_text())["config"]["steps"] for i in (0, 1)]
+    assert steps == [20, 30]  # the last round, whose policy is shipped, trains for --final-steps
     chosen = summary["rounds"][summary["chosen"]]  # the shipped policy: the best on validation
     assert chosen["val_success"] == max(r["val_success"] for r in summary["rounds"])
     assert (tmp_path / "bc.pt").read_bytes() == Path(chosen["checkpoint"]).read_bytes()

@@ -55,7 +55,9 @@ class DaggerConfig:
     apart for validation (never rolled out, never trained on); ``val_seed``: the episode seed of the
     validation episodes (other rooms, lights and cameras than the training episodes'); ``limit``: the
     first K training targets only are rolled out; ``val_limit``: the first K validation targets only
-    are run."""
+    are run; ``final_steps``: optimiser steps of the last round's training (the policy that is
+    shipped, trained on all the data), where the rounds before it, whose policies only roll out,
+    train for the `BCConfig`'s ``steps`` (None: those steps too)."""
 
     rounds: int = 2
     beta0: float = 0.5
@@ -65,6 +67,7 @@ class DaggerConfig:
     seed: int = 0
     limit: int | None = None  # roll out the first K training targets only (small runs, tests)
     val_limit: int | None = None  # validate on the first K validation targets only
+    final_steps: int | None = None  # optimiser steps of the last round (None: the BCConfig's)
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -219,8 +222,9 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
         if not ckpt.is_file():
             log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts")
-            trained = train_bc(demos + labelled, hand, replace(bc_config, seed=config.seed), out=ckpt, progress=progress,
-                               threads=threads)
+            steps = config.final_steps if round_ == config.rounds and config.final_steps else bc_config.steps
+            trained = train_bc(demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=ckpt,
+                               progress=progress, threads=threads)
         else:
             trained = json.loads(ckpt.with_suffix(".json").read_text())
         val_out = folder / f"val_{round_}.jsonl"

@@ -100,13 +100,15 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               help="DAgger: that share's factor from one round to the next.")
 @click.option("--dagger-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: roll out the first K training targets only [all].")
+@click.option("--final-steps", type=click.IntRange(min=1), default=None,
+              help="DAgger: optimiser steps of the last round, whose policy is shipped [--steps].")
 @click.option("--val-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: validate on the first K validation targets only [all].")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
 def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, threads,
-                 device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, val_targets,
+                 device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, final_steps, val_targets,
                  workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
@@ -127,7 +129,7 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
         from opend_mj.apps.dagger import DaggerConfig
 
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
-                              limit=dagger_targets, val_limit=val_targets)
+                              limit=dagger_targets, val_limit=val_targets, final_steps=final_steps)
         _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, workers, threads, progress)
         return
     try:
