@@ -97,7 +97,7 @@ expert-check: install
 ## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
 ## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
 ## then its record on the generated test split. HAND=allegro DAGGER=3 SEEDS=2 STEPS=3000 (each round's
-## training) FINAL_STEPS=9000 (the last round's, whose policy is shipped); BC_ARGS: more
+## training) FINAL_STEPS=9000 (the final round's, on all the data); BC_ARGS: more
 ## `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3

@@ -55,8 +55,8 @@ class DaggerConfig:
     apart for validation (never rolled out, never trained on); ``val_seed``: the episode seed of the
     validation episodes (other rooms, lights and cameras than the training episodes'); ``limit``: the
     first K training targets only are rolled out; ``val_limit``: the first K validation targets only
-    are run; ``final_steps``: optimiser steps of the last round's training (the policy that is
-    shipped, trained on all the data), where the rounds before it, whose policies only roll out,
+    are run; ``final_steps``: optimiser steps of the final round's training (its policy is the
+    one shipped where it validates best; it trains on all the data), where the rounds before it, whose policies only roll out,
     train for the `BCConfig`'s ``steps`` (None: those steps too)."""
 
     rounds: int = 2
@@ -67,7 +67,7 @@ class DaggerConfig:
     seed: int = 0
     limit: int | None = None  # roll out the first K training targets only (small runs, tests)
     val_limit: int | None = None  # validate on the first K validation targets only
-    final_steps: int | None = None  # optimiser steps of the last round (None: the BCConfig's)
+    final_steps: int | None = None  # optimiser steps of the final round (None: the BCConfig's)
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -187,7 +187,8 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                workers: int = 1, threads: int = 1, progress: bool = True, log=print, solver: str = "fasterrcnn") -> dict:
     """DAgger from ``demo_files`` (the planner's demonstrations of ``hand``) on the training split of
     ``cabinets_dir``; every round's files under ``folder``. Returns the summary (also written to
-    ``folder/dagger.json``): per round, the data it trained on and its validation success."""
+    ``folder/dagger.json``): per round, the data it trained on and its validation success, and
+    ``chosen``, the round whose policy to ship (:func:`best_round`)."""
     from dataclasses import replace
 
     from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, record_demos
@@ -238,6 +239,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                  "samples": trained.get("samples"), "beta": config.beta(round_) if round_ else None,
                  "val_success": round(100.0 * opened / max(1, len(recs)), 1), "val_episodes": len(recs)}
         summary["rounds"].append(entry)
+        summary["chosen"] = best_round(summary)["round"]
         log(f"round {round_}: validation {opened}/{len(recs)} opened ({entry['val_success']} %)")
         (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary

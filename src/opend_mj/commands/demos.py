@@ -101,7 +101,7 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--dagger-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: roll out the first K training targets only [all].")
 @click.option("--final-steps", type=click.IntRange(min=1), default=None,
-              help="DAgger: optimiser steps of the last round, whose policy is shipped [--steps].")
+              help="DAgger: optimiser steps of the final round, trained on all the data [--steps].")
 @click.option("--val-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: validate on the first K validation targets only [all].")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
@@ -145,11 +145,11 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
 
 def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, folder, workers, threads, progress) -> None:
     """`opend train-policy --dagger`: the DAgger rounds, then the checkpoint of the round with the best
-    validation success (`apps.dagger.best_round`) copied to ``out``."""
+    validation success (the summary's ``chosen``, `apps.dagger.best_round`) copied to ``out``."""
     import json
     import shutil
 
-    from opend_mj.apps.dagger import best_round, run_dagger
+    from opend_mj.apps.dagger import run_dagger
     from opend_mj.apps.demos import DemoFileError
 
     folder = folder or Path("build/dagger") / hand
@@ -158,16 +158,14 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
                              threads=threads, progress=progress, log=click.echo)
     except (ValueError, FileNotFoundError, DemoFileError) as exc:
         raise click.ClickException(str(exc)) from exc
-    chosen = best_round(summary)
-    best = Path(chosen["checkpoint"])
+    best = Path(summary["rounds"][summary["chosen"]]["checkpoint"])
     out.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(best, out)
     trained = json.loads(best.with_suffix(".json").read_text())
-    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": {**summary, "chosen": chosen["round"]}},
-                                                   indent=1) + "\n")
+    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
                                                            for r in summary["rounds"])
-               + f"; round {chosen['round']}'s policy -> {out}")
+               + f"; round {summary['chosen']}'s policy -> {out}")
 
 
 @click.command("bundle-policy")
