@@ -57,3 +57,29 @@ def test_several_seeds_are_pooled_with_each_seeds_rate(small_dataset, tmp_path):
     per_seed = [[json.loads(line) for line in (tmp_path / f"loc_s{k}.jsonl").read_text().splitlines()] for k in (0, 1)]
     assert [len(p) for p in per_seed] == [2, 2] and {r["seed"] for r in per_seed[1]} == {1}
     assert "| oracle | overall | 4 | 100.0 |" in result.output and "100 / 100 |" in result.output
+
+
+def test_perturbed_scenes_reach_the_solver_and_the_records(small_dataset, tmp_path):
+    """`opend evaluate-solver --perturb depth_noise=strong`: the solver reads the sensor's depth (holes,
+    noise), as an episode's planner does; each record names the perturbation; an unknown axis is
+    refused before anything is rendered."""
+    import numpy as np
+    from click.testing import CliRunner
+
+    from opend_mj.cli import main
+    from opend_mj.evaluation.locate import locate_frames, locate_jobs
+
+    clean = [d for _, _, _, d, _, _ in locate_frames(locate_jobs(small_dataset, "all", limit=1))][0]
+    noisy = [d for _, _, _, d, _, _ in locate_frames(locate_jobs(small_dataset, "all", limit=1,
+                                                                 perturb="depth_noise=strong"))][0]
+    assert (clean > 0).all() and (noisy == 0).any() and not np.allclose(clean[noisy > 0], noisy[noisy > 0])
+
+    out = tmp_path / "loc.jsonl"
+    result = CliRunner().invoke(main, ["evaluate-solver", "--solver", "oracle", "--cabinets", str(small_dataset),
+                                       "--split", "all", "--limit", "2", "--perturb", "depth_noise=strong",
+                                       "--no-progress", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert {json.loads(line)["perturb"] for line in out.read_text().splitlines()} == {"depth_noise=strong"}
+    bad = CliRunner().invoke(main, ["evaluate-solver", "--solver", "oracle", "--cabinets", str(small_dataset),
+                                    "--perturb", "depth_nois=strong", "--no-progress"])
+    assert bad.exit_code == 2 and "depth_nois" in bad.output

@@ -337,16 +337,22 @@ def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
                    "the same targets (the table adds each seed's rate).")
 @click.option("--light-scale", type=click.FloatRange(min=0), default=1.0, show_default=True)
 @click.option("--paraphrase", type=click.IntRange(0, 3), default=0, show_default=True)
+@click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
+              help="Render the scenes under a perturbation, as `opend run --perturb` does (repeatable).")
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write one JSON line per target and solver here (one file per solver and seed when "
                    "there are several: <stem>_<solver>_s<seed>.jsonl).")
 @click.option("--progress/--no-progress", default=True)
-def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase, limit, out, progress):
+def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase, perturb, limit, out, progress):
     """Locate rate of handle solvers: render each target's scene once, grade the solver's box (no episodes)."""
-    from opend_mj.evaluation.locate import evaluate_locate, format_summary, summarise
+    from opend_mj.evaluation.locate import evaluate_locate, format_summary, locate_jobs, summarise
 
     seeds = tuple(dict.fromkeys(seeds))
+    perturb = _check_perturb(perturb, paraphrase)
+    if perturb is not None:
+        _check_scenes([job for seed in seeds for job in locate_jobs(cabinets_dir, split, seed, light_scale,
+                                                                     paraphrase, limit, perturb=perturb)])
     records = []
     for solver in solvers:
         for seed in seeds:
@@ -355,7 +361,8 @@ def evaluate_solver(solvers, cabinets_dir, split, seeds, light_scale, paraphrase
                 tags = ([solver] if len(solvers) > 1 else []) + ([f"s{seed}"] if len(seeds) > 1 else [])
                 part = out.with_name("_".join([out.stem, *tags]) + out.suffix)
             records += evaluate_locate(cabinets_dir, solver, split=split, seed=seed, light_scale=light_scale,
-                                       paraphrase=paraphrase, limit=limit, progress=progress, out=part)
+                                       paraphrase=paraphrase, limit=limit, progress=progress, out=part,
+                                       perturb=perturb)
     click.echo(format_summary(summarise(records)))
 
 

@@ -1,8 +1,8 @@
 """Locate quality of a handle solver on its own (`opend evaluate-solver`), without running episodes.
 
-For every target of a split, the scene an episode would see (same cabinet, room, seed, light and
-instruction wording as `opend run`) is rendered once, the solver is asked for the named handle, and
-the answer is graded against the simulator's handle boxes of every target:
+For every target of a split, the scene an episode would see (same cabinet, room, seed, light,
+instruction wording and perturbation as `opend run`, the depth image as the task's sensor gives it)
+is rendered once, the solver is asked for the named handle, and the answer is graded against the simulator's handle boxes of every target:
 
 * ``located``: the box centre lies inside the named handle's box (3 px margin, as the episode
   runner's failure stages use);
@@ -41,6 +41,7 @@ class LocateRecord:
     seed: int
     light_scale: float
     paraphrase: int
+    perturb: str | None
     box: list | None
     gt_box: list | None
     verdict: str  # located | wrong_handle | missed
@@ -61,15 +62,18 @@ def grade(box, target_joint: str, boxes: dict[str, tuple | None]) -> str:
 
 
 def locate_jobs(cabinets_dir: Path, split: str = "test", seed: int = 0, light_scale: float = 1.0,
-                paraphrase: int = 0, limit: int | None = None, hand: str = "allegro") -> list[EpisodeJob]:
-    """The targets of a split as episode jobs (one hand: the hand is out of the image at the start)."""
+                paraphrase: int = 0, limit: int | None = None, hand: str = "allegro",
+                perturb: str | None = None) -> list[EpisodeJob]:
+    """The targets of a split as episode jobs (one hand: the hand is out of the image at the start);
+    ``perturb``: a canonical perturbation spec (`sim.perturb.parse_perturb`) or None."""
     return make_jobs(cabinets_dir, [hand], "oracle", split=split, seed=seed, light_scale=light_scale,
-                     limit=limit, paraphrase=paraphrase)
+                     limit=limit, paraphrase=paraphrase, perturb=perturb)
 
 
 def locate_frames(jobs: list[EpisodeJob]):
     """For each job, the scene its episode would see at the start: yields (job, task, rgb, depth,
-    camera view, every target's handle box). One environment per cabinet."""
+    camera view, every target's handle box). The depth is the task's sensor's, fused over the frames
+    an episode fuses (under depth_noise, not the render's). One environment per cabinet."""
     from opend_mj.evaluation.jobs import group_jobs
     from opend_mj.evaluation.runner import instruction_for, make_episode_env
     from opend_mj.sim.camera import RGBDCamera
@@ -83,6 +87,7 @@ def locate_frames(jobs: list[EpisodeJob]):
                 physics, task = env.physics, env.task
                 with RGBDCamera(physics, "front", task.config.image_size, task.config.image_size) as cam:
                     rgb, depth = cam.render()
+                depth = task.sense_depth(rgb, depth, frames=task.config.depth_frames)
                 yield job, task, rgb, depth, task.camera_view(physics), task.handle_boxes(physics)
         finally:
             env.close()
@@ -90,14 +95,16 @@ def locate_frames(jobs: list[EpisodeJob]):
 
 def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", seed: int = 0,
                     light_scale: float = 1.0, paraphrase: int = 0, limit: int | None = None,
-                    progress: bool = True, out: Path | None = None) -> list[LocateRecord]:
-    """Grade ``solver_name`` on every target of ``split``; writes the records to ``out`` (JSONL) if given."""
+                    progress: bool = True, out: Path | None = None,
+                    perturb: str | None = None) -> list[LocateRecord]:
+    """Grade ``solver_name`` on every target of ``split`` (under ``perturb``, a canonical spec, if
+    given); writes the records to ``out`` (JSONL) if given."""
     from tqdm import tqdm
 
     from opend_mj.policy.perception import refine_box_with_depth, snaps_to_depth
     from opend_mj.policy.factory import build_solver
 
-    jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit)
+    jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit, perturb=perturb)
     state: dict = {}
     solver = build_solver(solver_name, ground_truth=lambda: state["boxes"][state["joint"]])
     records: list[LocateRecord] = []
@@ -115,7 +122,7 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
         records.append(LocateRecord(
             cabinet=job.cabinet, joint=job.joint, split=job.split, target_type=task.target.kind,
             instruction=task.instruction, solver=solver_name, seed=job.seed, light_scale=job.light_scale,
-            paraphrase=job.paraphrase, box=[round(x, 2) for x in box] if box else None,
+            paraphrase=job.paraphrase, perturb=job.perturb, box=[round(x, 2) for x in box] if box else None,
             gt_box=[round(x, 2) for x in gt] if gt else None, verdict=grade(box, job.joint, boxes),
             verdict_refined=grade(refined, job.joint, boxes), seconds=round(time.perf_counter() - t0, 3)))
         bar.update(1)
