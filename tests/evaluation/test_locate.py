@@ -83,3 +83,15 @@ def test_perturbed_scenes_reach_the_solver_and_the_records(small_dataset, tmp_pa
     bad = CliRunner().invoke(main, ["evaluate-solver", "--solver", "oracle", "--cabinets", str(small_dataset),
                                     "--perturb", "depth_nois=strong", "--no-progress"])
     assert bad.exit_code == 2 and "depth_nois" in bad.output
+
+
+def test_the_sensor_trained_detector_locates_handles_in_a_real_sensors_depth(small_dataset):
+    """`--solver fasterrcnn-sensor` (checkpoints/fasterrcnn_sensor.pt, trained on the depth_noise
+    sensor's depth too) reads holes as holes and finds the named handles of generated cabinets
+    whose depth comes from the strong sensor."""
+    from opend_mj.policy.learned.detector import SensorFasterRCNNSolver
+
+    assert SensorFasterRCNNSolver().config.relief_holes
+    records = evaluate_locate(small_dataset, "fasterrcnn-sensor", split="all", limit=8, progress=False,
+                              perturb="depth_noise=strong")
+    assert sum(r.verdict == "located" for r in records) >= 6, [(r.cabinet, r.joint, r.verdict) for r in records]

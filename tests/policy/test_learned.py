@@ -469,6 +469,46 @@ def test_depth_relief_marks_what_stands_proud(cabinet_depth):
         detector_input(np.zeros((256, 256, 3), np.uint8), None, DetectorConfig(depth=True))
 
 
+def test_depth_relief_ignores_a_sensors_holes(cabinet_depth):
+    """Holes (depth 0, as a real sensor reports missing readings at edges) neither stand proud nor
+    make the panel around them stand proud; a bar beside a hole still does."""
+    from opend_mj.policy.learned.detector import depth_relief
+
+    clean = depth_relief(cabinet_depth)
+    holed = cabinet_depth.copy()
+    holed[100:104, 60:200] = 0.0  # a missing stripe across the panel
+    holed[40:216, 38:42] = 0.0  # the front's left edge
+    relief = depth_relief(holed, holes=True)
+    assert np.all(relief[100:104, 60:200] == 0.0)
+    assert np.abs(relief[90:115, 70:190][(np.arange(90, 115) < 100) | (np.arange(90, 115) >= 104)]).max() < 0.05
+    assert relief[72, 85] > 0.4 and abs(relief[72, 85] - clean[72, 85]) < 0.05
+    assert np.array_equal(depth_relief(cabinet_depth, holes=False), clean)  # no holes: either reading
+    # read as surfaces 10 m away (the detectors trained on exact renders), the stripe's rim stands proud
+    assert depth_relief(holed, holes=False)[96, 100] > 0.5
+
+def test_detector_training_can_read_a_real_sensors_depth(tiny_data):
+    """`opend train --depth-noise P`: a share P of the training images carry the depth_noise sensor's
+    depth (noise and holes), drawn from the batch's random stream (the same stream, the same images)."""
+    import random
+
+    from opend_mj.policy.learned.detector import DetectorConfig
+    from opend_mj.policy.learned.train import _detector_batch
+
+    from opend_mj.policy.learned.data import load_records
+
+    data, _ = tiny_data
+    recs = load_records(data)
+    cfg = DetectorConfig(kinds=True, depth=True, relief_holes=True)
+
+    def batch(p, seed):
+        xs, _ = _detector_batch(data, recs, [0], True, random.Random(seed), "cpu", cfg, depth_noise=p)
+        return xs[0].numpy()
+
+    clean, noisy = batch(0.0, 1), batch(1.0, 1)
+    assert (noisy[3] == 0).sum() > (clean[3] == 0).sum() + 100  # the sensor's holes
+    assert np.array_equal(noisy, batch(1.0, 1))
+
+
 def test_depth_verified_candidates_drop_an_edge_the_detector_takes_for_a_handle():
     """The default: only depth proposals are candidates. A confident detection on a seam below the
     drawers (no proposal there) no longer counts, so "bottom drawer" is the lowest real handle; a

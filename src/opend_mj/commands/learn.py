@@ -83,10 +83,13 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--init", "init", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Start from this checkpoint of the same solver (fine-tuning; for fasterrcnn a one-class "
                    "checkpoint seeds both kinds).")
+@click.option("--depth-noise", type=click.FloatRange(0, 1), default=0.0, show_default=True,
+              help="fasterrcnn: chance that a training image's depth is a real sensor's (noise and holes, "
+                   "`--perturb depth_noise` at a level drawn per image); validation adds the strong sensor's recall.")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, reword, evaluate_subset, threshold,
-          pretrained, kinds, depth, context, init, progress):
+          pretrained, kinds, depth, context, init, depth_noise, progress):
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
@@ -117,7 +120,8 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
 
         cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
                              max_size=max(min_size, 640) if min_size else None, kinds=kinds,
-                             depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn")
+                             depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn",
+                             relief_holes=depth_noise > 0)
         meta = T.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
-                                  init=init, log=click.echo, **common)
+                                  init=init, depth_noise=depth_noise, log=click.echo, **common)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")

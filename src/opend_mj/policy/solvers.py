@@ -50,6 +50,8 @@ class OracleSolver:
 _REGISTRY: dict[str, Callable[..., HandleSolver] | str] = {
     "oracle": OracleSolver,
     "fasterrcnn": "opend_mj.policy.learned.detector:FasterRCNNSolver",  # checkpoints/fasterrcnn.pt
+    # trained on a real depth sensor's images too: checkpoints/fasterrcnn_sensor.pt
+    "fasterrcnn-sensor": "opend_mj.policy.learned.detector:SensorFasterRCNNSolver",
     "cliport": "opend_mj.policy.learned.affordance:CLIPortSolver",  # checkpoints/cliport.pt
 }
 

@@ -513,6 +513,16 @@ class DepthSensor:
         return out
 
 
+def sensor_depth(rgb: np.ndarray, depth: np.ndarray, level: "Level | str", seed: int, frames: int = 1,
+                 config: PerturbConfig = DEFAULT_CONFIG) -> np.ndarray:
+    """A rendered depth image as the depth_noise sensor at ``level`` (a `Level` or "mild" / "strong")
+    gives it, ``frames`` frames of the still scene fused as the task fuses them
+    (`OpenCabinetTask.sense_depth`): training data for solvers that must read a real sensor."""
+    lv = config.level(level) if isinstance(level, str) else level
+    sensor = DepthSensor(lv, seed)
+    return fuse_depth([sensor(rgb, depth) for _ in range(max(1, int(frames)))])
+
+
 def fuse_depth(frames: list[np.ndarray]) -> np.ndarray:
     """One depth image from several frames of a still scene, as a depth camera's temporal filter
     gives it: per pixel, the median of the frames that have a reading (0, none, where no frame has

@@ -60,8 +60,10 @@ from opend_mj.policy.learned.detector.model import (
     load_detector,
 )
 from opend_mj.policy.learned.detector.solver import (
+    SENSOR_CHECKPOINT,
     FasterRCNNSolver,
     MatchConfig,
+    SensorFasterRCNNSolver,
     apply_observed_kinds,
     confirmed,
     observed_members,
@@ -78,6 +80,8 @@ __all__ = [
     "DetectorConfig",
     "FasterRCNNSolver",
     "KIND_LABELS",
+    "SENSOR_CHECKPOINT",
+    "SensorFasterRCNNSolver",
     "MatchConfig",
     "RELIEF_SCALE",
     "RELIEF_WINDOW",

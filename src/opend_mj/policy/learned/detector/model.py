@@ -35,6 +35,11 @@ class DetectorConfig:
     #: looks the same on a drawer and along a door's top edge; the panel around it (a seam just
     #: above and a tall front below, or seams above and below) tells them apart. ``compact_fpn`` only.
     context: bool = False
+    #: How the relief channel reads a depth image's holes (0: no reading, as a real sensor reports
+    #: at edges and on dark surfaces): True, as holes (:func:`depth_relief` ``holes``: left out,
+    #: relief 0), for a detector trained on a sensor's depth (`opend train --depth-noise`); False, as
+    #: surfaces 10 m away, as the detectors trained on exact renders read them.
+    relief_holes: bool = False
 
     @property
     def num_classes(self) -> int:
@@ -51,14 +56,25 @@ RELIEF_WINDOW = 25
 RELIEF_SCALE = 0.05
 
 
-def depth_relief(depth: np.ndarray) -> np.ndarray:
+def depth_relief(depth: np.ndarray, holes: bool = True) -> np.ndarray:
     """(H, W) float32 in [-1, 1]: the local mean depth (``RELIEF_WINDOW`` px) minus the depth, over
-    ``RELIEF_SCALE``; positive where a pixel stands nearer than its surroundings (a handle)."""
+    ``RELIEF_SCALE``; positive where a pixel stands nearer than its surroundings (a handle).
+
+    Pixels without a reading (0 or not finite, as a real sensor reports holes at edges and on dark
+    surfaces): with ``holes``, left out of the local mean, with relief 0 (a hole is not a surface
+    10 m away, which would mark everything around it as standing proud); without, read as 10 m
+    away (`DetectorConfig.relief_holes`). An image without holes gives the same relief either way."""
     from scipy.ndimage import uniform_filter
 
     d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
-    d = np.where(d > 0.05, d, 10.0).astype(np.float32)
-    return np.clip((uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE, -1.0, 1.0)
+    read = d > 0.05
+    if not holes or read.all():
+        d = np.where(read, d, 10.0).astype(np.float32)
+        return np.clip((uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE, -1.0, 1.0)
+    w = uniform_filter(read.astype(np.float32), RELIEF_WINDOW, mode="nearest")
+    mean = uniform_filter(np.where(read, d, 0.0).astype(np.float32), RELIEF_WINDOW, mode="nearest") / np.maximum(w, 1e-6)
+    relief = np.where(read & (w > 0), (mean - d) / RELIEF_SCALE, 0.0)
+    return np.clip(relief, -1.0, 1.0).astype(np.float32)
 
 
 def detector_input(rgb: np.ndarray, depth: np.ndarray | None, config: "DetectorConfig"):
@@ -70,7 +86,7 @@ def detector_input(rgb: np.ndarray, depth: np.ndarray | None, config: "DetectorC
     if config.depth:
         if depth is None:
             raise ValueError("this detector reads depth (DetectorConfig.depth): pass the depth image")
-        x = torch.cat([x, torch.from_numpy(depth_relief(depth))[None]], 0)
+        x = torch.cat([x, torch.from_numpy(depth_relief(depth, holes=config.relief_holes))[None]], 0)
     return x
 
 
@@ -174,7 +190,9 @@ def build_detector(config: DetectorConfig = DetectorConfig()):
     if config.backbone not in BACKBONES:
         raise ValueError(f"backbone must be one of {BACKBONES}, got {config.backbone!r}")
     if config.backbone == "compact_fpn":
-        return _build_compact(config)
+        model = _build_compact(config)
+        model.detector_config = config  # what its input is (`detector_input`)
+        return model
     if config.depth or config.context:
         raise ValueError(f"the depth channel and the context window need the compact_fpn backbone, "
                          f"not {config.backbone!r}")
@@ -300,7 +318,8 @@ def load_detector(checkpoint: Path | str | None = None, device: str | None = Non
 
 
 def _input(model, rgb, depth):
-    return detector_input(rgb, depth, DetectorConfig(depth=len(model.transform.image_mean) == 4))
+    config = getattr(model, "detector_config", None) or DetectorConfig(depth=len(model.transform.image_mean) == 4)
+    return detector_input(rgb, depth, config)
 
 
 @dataclass

@@ -211,3 +211,19 @@ class FasterRCNNSolver:
         from_depth = self.match.depth_verified and extra is not None and len(extra) > 0
         return HandleBox(float(b[0]), float(b[1]), float(b[2]), float(b[3]), orientation=box_orientation(b),
                          score=score, from_depth=from_depth)
+
+
+#: The detector trained on a real depth sensor's images as well as exact renders (`opend train
+#: --depth-noise`; checkpoints/README.md).
+SENSOR_CHECKPOINT = Path("checkpoints/fasterrcnn_sensor.pt")
+
+
+class SensorFasterRCNNSolver(FasterRCNNSolver):
+    """``fasterrcnn-sensor``: the Faster R-CNN solver with the detector trained on the depth_noise
+    sensor's depth too (noise growing with distance, holes at edges and on dark surfaces), whose
+    relief channel reads holes as holes; the rest as :class:`FasterRCNNSolver`."""
+
+    name = "fasterrcnn-sensor"
+
+    def __init__(self, checkpoint: Path | str | None = None, **options):
+        super().__init__(checkpoint if checkpoint is not None else SENSOR_CHECKPOINT, **options)
