@@ -216,6 +216,13 @@ def test_run_and_robustness_table(small_dataset, tmp_path):
     assert cell["episodes"] == 1 and "delta" in cell and len(cell["ci95"]) == 2
     assert "| oracle | franka |" in (tmp_path / "rob.md").read_text()
     assert (tmp_path / "rob.png").stat().st_size > 1000
+    # another axis into the same records: its table holds nominal and that axis only
+    res = CliRunner().invoke(main, ["robustness", "--solver", "oracle", "--hand", "franka", "--cabinets",
+                                    str(small_dataset), "--limit", "1", "--axis", "light",
+                                    "--records", str(rec), "--out", str(tmp_path / "light")])
+    assert res.exit_code == 0, res.output
+    light = json.loads((tmp_path / "light.json").read_text())["rows"][0]["conditions"]
+    assert set(light) == {"nominal", "light=mild", "light=strong"}
     from opend_mj.evaluation.report import results_markdown
 
     (tmp_path / "results" / "robustness").mkdir(parents=True)

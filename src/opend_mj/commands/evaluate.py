@@ -432,11 +432,15 @@ def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit,
                    f"{counts['errors']} errors", err=True)
     from opend_mj.evaluation.jobs import make_jobs
 
-    # the table holds exactly this command's episodes (a records file may hold more: another --limit)
+    from opend_mj.sim.perturb import perturb_items
+
+    # the table holds exactly this command's episodes (a records file may hold more: another --limit,
+    # other hands, other axes)
     wanted = {(j.cabinet, j.joint, j.hand) for j in make_jobs(cabinets_dir, hands, "-", split=split, seed=seed,
                                                               limit=limit)}
     records = [r for r in load_records([p for p in paths if p.is_file()])
-               if (r["cabinet"], r["joint"], r["hand"]) in wanted and int(r.get("seed", 0)) == seed]
+               if (r["cabinet"], r["joint"], r["hand"]) in wanted and int(r.get("seed", 0)) == seed
+               and set(perturb_items(r.get("perturb"))) <= set(axes)]
     if not records:
         raise click.ClickException(f"no records under {records_dir} for {', '.join(n for n, _, _ in entries)}")
     words = ([f"--solver {x}" for x in solvers] + [f"--policy {x}" for x in policies]
