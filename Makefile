@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real robustness robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -80,6 +80,11 @@ ROBUST_HANDS ?= --hand allegro --hand franka
 robustness: install
 	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split test --workers $(WORKERS) $(RUN_ARGS) \
 		--records results/robustness --out results/robustness/generated
+## The robust baseline under depth noise (docs/robustness.md): Faster R-CNN and the detector trained on
+## the depth sensor's images (fasterrcnn-sensor), all four hands, nominal and depth_noise at both levels.
+robustness-depth: install
+	$(BIN)/opend robustness --solver fasterrcnn --solver fasterrcnn-sensor $(HANDS) --split test --axis depth_noise \
+		--workers $(WORKERS) --records results/robustness --out results/robustness/depth_noise
 robustness-real: install
 	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
 	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split $(SPLIT) --cabinets $(REAL_CABINETS) \
