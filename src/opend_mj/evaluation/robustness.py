@@ -142,17 +142,18 @@ def table_markdown(table: dict, title: str = "Robustness") -> str:
 
 def plot_table(table: dict, path: Path) -> Path:
     """Success per condition against nominal (dashed), one panel per hand, one series per solver or
-    agent, with 95 % intervals."""
+    agent, with 95 % intervals; the conditions the table measured only."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    names = ["nominal"] + [f"{a}={lv}" for a in AXES for lv in LEVELS]
+    measured = {name for r in table["rows"] for name in r["conditions"]}
+    names = [n for n in ["nominal"] + [f"{a}={lv}" for a in AXES for lv in LEVELS] if n in measured]
     hands = sorted({r["hand"] for r in table["rows"]})
     solvers = sorted({r["solver"] for r in table["rows"]})
-    fig, axes = plt.subplots(len(hands), 1, figsize=(14, 3.6 * max(1, len(hands))), squeeze=False)
+    fig, axes = plt.subplots(len(hands), 1, figsize=(max(7.5, 0.85 * len(names) + 1.5), 3.6 * max(1, len(hands))), squeeze=False)
     for ax, hand in zip(axes[:, 0], hands):
         for i, solver in enumerate(solvers):
             row = next((r for r in table["rows"] if r["hand"] == hand and r["solver"] == solver), None)
@@ -175,7 +176,7 @@ def plot_table(table: dict, path: Path) -> Path:
         ax.set_xticklabels([n.replace("=", "\n") for n in names], fontsize=7)
         ax.set_ylim(0, 105)
         ax.set_ylabel("success (%)")
-        ax.set_title(f"{hand}: success per perturbation (dashed: nominal; bars: 95 % Wilson interval)", fontsize=9)
+        ax.set_title(f"{hand} (dashed: nominal; bars: 95 % Wilson interval)", fontsize=9)
         ax.grid(axis="y", alpha=0.3)
         ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
