@@ -492,7 +492,7 @@ def test_detector_training_can_read_a_real_sensors_depth(tiny_data):
     import random
 
     from opend_mj.policy.learned.detector import DetectorConfig
-    from opend_mj.policy.learned.train import _detector_batch
+    from opend_mj.policy.learned.train_detector import _detector_batch
 
     from opend_mj.policy.learned.data import load_records
 

@@ -94,6 +94,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
     import torch
 
     from opend_mj.policy.learned import train as T
+    from opend_mj.policy.learned import train_detector as TD
 
     if threads:
         torch.set_num_threads(threads)
@@ -103,7 +104,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         if solver == "cliport":
             metrics = T.evaluate_cliport(out, data_dir, evaluate_subset, device=device, progress=progress)
         else:
-            metrics = T.evaluate_detector(out, data_dir, evaluate_subset, threshold=threshold, device=device,
+            metrics = TD.evaluate_detector(out, data_dir, evaluate_subset, threshold=threshold, device=device,
                                           progress=progress)
         click.echo(json.dumps(metrics))
         return
@@ -122,6 +123,6 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
                              max_size=max(min_size, 640) if min_size else None, kinds=kinds,
                              depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn",
                              relief_holes=depth_noise > 0)
-        meta = T.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
+        meta = TD.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
                                   init=init, depth_noise=depth_noise, log=click.echo, **common)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")
