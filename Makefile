@@ -75,7 +75,7 @@ eval-real: install
 ## ROBUST_SOLVERS with the hands in ROBUST_HANDS. `robustness`: the generated test split (records and table
 ## under results/robustness/); `robustness-real`: your compiled PartNet-Mobility folder as for eval-real
 ## (records under build/, only the table's counts in results/real/robustness_<split><tag>.json).
-ROBUST_SOLVERS ?= --solver oracle --solver fasterrcnn
+ROBUST_SOLVERS ?= --solver oracle --solver fasterrcnn --solver cliport
 ROBUST_HANDS ?= --hand allegro --hand franka
 robustness: install
 	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split test --workers $(WORKERS) $(RUN_ARGS) \
