@@ -509,6 +509,30 @@ def test_detector_training_can_read_a_real_sensors_depth(tiny_data):
     assert np.array_equal(noisy, batch(1.0, 1))
 
 
+def test_cliport_training_can_read_a_real_sensors_depth(tiny_data):
+    """`opend train --solver cliport --depth-noise P`: the depth channel of a share P of the training
+    images is the depth_noise sensor's (holes read 0 m), the same for the same random stream."""
+    import random
+
+    from opend_mj.policy.learned.affordance import AffordanceConfig
+    from opend_mj.policy.learned.data import load_records
+    from opend_mj.policy.learned.text import CachedEncoder
+    from opend_mj.policy.learned.train import _cliport_batch
+
+    data, _ = tiny_data
+    recs = load_records(data)
+    cfg = AffordanceConfig(text_encoder="bow", image_size=256)
+    text = CachedEncoder("bow")
+
+    def depth_channel(p, seed):
+        x, _, _ = _cliport_batch(data, recs, [(0, 0)], text, cfg, True, random.Random(seed), depth_noise=p)
+        return x[0, 3].numpy()
+
+    clean, noisy = depth_channel(0.0, 2), depth_channel(1.0, 2)
+    assert (noisy == noisy.min()).sum() > (clean == clean.min()).sum() + 100  # the sensor's holes
+    assert np.array_equal(noisy, depth_channel(1.0, 2))
+
+
 def test_depth_verified_candidates_drop_an_edge_the_detector_takes_for_a_handle():
     """The default: only depth proposals are candidates. A confident detection on a seam below the
     drawers (no proposal there) no longer counts, so "bottom drawer" is the lowest real handle; a

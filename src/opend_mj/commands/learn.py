@@ -84,8 +84,8 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
               help="Start from this checkpoint of the same solver (fine-tuning; for fasterrcnn a one-class "
                    "checkpoint seeds both kinds).")
 @click.option("--depth-noise", type=click.FloatRange(0, 1), default=0.0, show_default=True,
-              help="fasterrcnn: chance that a training image's depth is a real sensor's (noise and holes, "
-                   "`--perturb depth_noise` at a level drawn per image); validation adds the strong sensor's recall.")
+              help="Chance that a training image's depth is a real sensor's (noise and holes, `--perturb "
+                   "depth_noise` at a level drawn per image); fasterrcnn's validation adds the strong sensor's recall.")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, reword, evaluate_subset, threshold,
@@ -115,7 +115,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
                                text_encoder=text_encoder, reword=reword)
         meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
-                               init=init, log=click.echo, **common)
+                               init=init, depth_noise=depth_noise, log=click.echo, **common)
     else:
         from opend_mj.policy.learned.detector import DetectorConfig
 

@@ -228,7 +228,11 @@ def load_pretrained(model, path: Path, solver: str, log: Callable[[str], None] =
 # --------------------------------------------------------------------------------------------------
 
 
-def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: random.Random):
+def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: random.Random,
+                   depth_noise: float = 0.0):
+    """Inputs, instruction embeddings and target masks of a batch. Augmentation: horizontal flips
+    (the instruction mirrored), rewordings, and with chance ``depth_noise`` a real sensor's depth
+    (`sim.perturb.sensor_depth`, level and fused frames drawn per image as for the detector)."""
     import torch
 
     from opend_mj.policy.learned.affordance import prepare_image, target_mask
@@ -245,6 +249,12 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
             instruction = mirror_instruction(instruction)
         if augment:
             instruction = training_instruction(instruction, rng, config.reword)
+        if augment and depth_noise > 0 and rng.random() < depth_noise:
+            from opend_mj.policy.learned.train_detector import SENSOR_FRAMES, SENSOR_LEVELS
+            from opend_mj.sim.perturb import sensor_depth
+
+            depth = sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), rng.choice(SENSOR_LEVELS),
+                                 rng.getrandbits(31), rng.choice(SENSOR_FRAMES))
         x = prepare_image(rgb.copy(), depth.copy(), config.image_size)
         yt = torch.from_numpy(np.ascontiguousarray(y))[None, None]
         if yt.shape[-1] != config.image_size:
@@ -305,10 +315,11 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                   pos_weight: float = 20.0, max_minutes: float | None = None, resume: bool = False,
                   state_path: Path | None = None, device: str | None = None, progress: bool = True,
                   seed: int = 0, max_train: int | None = None, max_val: int | None = None,
-                  pretrained: Path | None = None, init: Path | None = None,
+                  pretrained: Path | None = None, init: Path | None = None, depth_noise: float = 0.0,
                   log: Callable[[str], None] = print) -> dict:
     """Train the CLIPort-style affordance model; returns the checkpoint's metadata. ``init``: start
-    from another CLIPort checkpoint of the same architecture (fine-tuning on new renders)."""
+    from another CLIPort checkpoint of the same architecture (fine-tuning on new renders);
+    ``depth_noise``: the chance that a training image's depth is a real sensor's (:func:`_cliport_batch`)."""
     import torch
     from tqdm import tqdm
 
@@ -352,7 +363,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                    unit="batch")
         stopped = False
         for b in bar:
-            x, t, y = _cliport_batch(data_dir, train_recs, pairs[b:b + batch_size], text, config, True, rng)
+            x, t, y = _cliport_batch(data_dir, train_recs, pairs[b:b + batch_size], text, config, True, rng,
+                                     depth_noise=depth_noise)
             loss = bce(model(x.to(dev), t.to(dev)), y.to(dev))
             opt.zero_grad()
             loss.backward()
@@ -386,7 +398,7 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val centre-in-box {row['val_centre_in_box']:.3f}  ({row['seconds']:.0f} s)")
         loop.save(epoch, model, opt, sched, {"config": asdict(config), "text": text.state(),
-                                             "data": str(data_dir), "pos_weight": pos_weight,
+                                             "data": str(data_dir), "pos_weight": pos_weight, "depth_noise": depth_noise,
                                              **({"init": str(init)} if init else {})},
                   metric="val_centre_in_box")
         if stopped:
