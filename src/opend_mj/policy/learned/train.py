@@ -32,6 +32,13 @@ import numpy as np
 from opend_mj.policy.learned.data import load_images, load_records
 
 
+#: Depth-sensor augmentation of training (``depth_noise``, both solvers): the levels and the numbers of
+#: fused frames drawn per image (one frame: a single reading; 8: what an episode fuses,
+#: `sim.task.TaskConfig.depth_frames`).
+SENSOR_LEVELS = ("mild", "strong")
+SENSOR_FRAMES = (1, 8)
+
+
 def _device(device: str | None):
     import torch
 
@@ -250,7 +257,6 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
         if augment:
             instruction = training_instruction(instruction, rng, config.reword)
         if augment and depth_noise > 0 and rng.random() < depth_noise:
-            from opend_mj.policy.learned.train_detector import SENSOR_FRAMES, SENSOR_LEVELS
             from opend_mj.sim.perturb import sensor_depth
 
             depth = sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), rng.choice(SENSOR_LEVELS),

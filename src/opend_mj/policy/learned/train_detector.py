@@ -19,15 +19,8 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
-from opend_mj.policy.learned.train import (_device, _Loop, _optimise, _valid_targets, iou, load_pretrained,
-                                           plot_history)
-
-
-#: Depth-sensor augmentation of detector training (``depth_noise``): the levels and the numbers of
-#: fused frames drawn per image (one frame: a single reading; 8: what an episode fuses,
-#: `sim.task.TaskConfig.depth_frames`).
-SENSOR_LEVELS = ("mild", "strong")
-SENSOR_FRAMES = (1, 8)
+from opend_mj.policy.learned.train import (SENSOR_FRAMES, SENSOR_LEVELS, _device, _Loop, _optimise,
+                                           _valid_targets, iou, load_pretrained, plot_history)
 
 
 def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev, config=None,
