@@ -2,7 +2,8 @@
 
 For every target of a split, the scene an episode would see (same cabinet, room, seed, light,
 instruction wording and perturbation as `opend run`, the depth image as the task's sensor gives it)
-is rendered once, the solver is asked for the named handle, and the answer is graded against the simulator's handle boxes of every target:
+is rendered once, the solver is asked for the named handle, and the answer is graded against the
+simulator's handle boxes of every target:
 
 * ``located``: the box centre lies inside the named handle's box (3 px margin, as the episode
   runner's failure stages use);

@@ -153,7 +153,8 @@ def plot_table(table: dict, path: Path) -> Path:
     names = [n for n in ["nominal"] + [f"{a}={lv}" for a in AXES for lv in LEVELS] if n in measured]
     hands = sorted({r["hand"] for r in table["rows"]})
     solvers = sorted({r["solver"] for r in table["rows"]})
-    fig, axes = plt.subplots(len(hands), 1, figsize=(max(7.5, 0.85 * len(names) + 1.5), 3.6 * max(1, len(hands))), squeeze=False)
+    width = max(7.5, 0.85 * len(names) + 1.5)  # inches: about 0.85 per condition
+    fig, axes = plt.subplots(len(hands), 1, figsize=(width, 3.6 * max(1, len(hands))), squeeze=False)
     for ax, hand in zip(axes[:, 0], hands):
         for i, solver in enumerate(solvers):
             row = next((r for r in table["rows"] if r["hand"] == hand and r["solver"] == solver), None)

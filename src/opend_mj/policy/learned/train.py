@@ -39,6 +39,18 @@ SENSOR_LEVELS = ("mild", "strong")
 SENSOR_FRAMES = (1, 8)
 
 
+def sensor_augment(rgb: np.ndarray, depth: np.ndarray, rng: random.Random, chance: float) -> np.ndarray:
+    """``depth`` as the depth_noise sensor gives it (`sim.perturb.sensor_depth`: a level of
+    ``SENSOR_LEVELS`` and a frame count of ``SENSOR_FRAMES`` drawn from ``rng``) with probability
+    ``chance``, else unchanged; ``rng`` is not drawn from at all when ``chance`` is 0."""
+    if chance <= 0 or rng.random() >= chance:
+        return depth
+    from opend_mj.sim.perturb import sensor_depth
+
+    return sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), rng.choice(SENSOR_LEVELS),
+                        rng.getrandbits(31), rng.choice(SENSOR_FRAMES))
+
+
 def _device(device: str | None):
     import torch
 
@@ -239,7 +251,7 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
                    depth_noise: float = 0.0):
     """Inputs, instruction embeddings and target masks of a batch. Augmentation: horizontal flips
     (the instruction mirrored), rewordings, and with chance ``depth_noise`` a real sensor's depth
-    (`sim.perturb.sensor_depth`, level and fused frames drawn per image as for the detector)."""
+    (:func:`sensor_augment`)."""
     import torch
 
     from opend_mj.policy.learned.affordance import prepare_image, target_mask
@@ -256,11 +268,8 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
             instruction = mirror_instruction(instruction)
         if augment:
             instruction = training_instruction(instruction, rng, config.reword)
-        if augment and depth_noise > 0 and rng.random() < depth_noise:
-            from opend_mj.sim.perturb import sensor_depth
-
-            depth = sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), rng.choice(SENSOR_LEVELS),
-                                 rng.getrandbits(31), rng.choice(SENSOR_FRAMES))
+        if augment:
+            depth = sensor_augment(rgb, depth, rng, depth_noise)
         x = prepare_image(rgb.copy(), depth.copy(), config.image_size)
         yt = torch.from_numpy(np.ascontiguousarray(y))[None, None]
         if yt.shape[-1] != config.image_size:
@@ -404,7 +413,8 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
         log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
             f"val centre-in-box {row['val_centre_in_box']:.3f}  ({row['seconds']:.0f} s)")
         loop.save(epoch, model, opt, sched, {"config": asdict(config), "text": text.state(),
-                                             "data": str(data_dir), "pos_weight": pos_weight, "depth_noise": depth_noise,
+                                             "data": str(data_dir), "pos_weight": pos_weight,
+                                             "depth_noise": depth_noise,
                                              **({"init": str(init)} if init else {})},
                   metric="val_centre_in_box")
         if stopped:

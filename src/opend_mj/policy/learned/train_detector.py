@@ -20,7 +20,7 @@ import numpy as np
 
 from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
 from opend_mj.policy.learned.train import (SENSOR_FRAMES, SENSOR_LEVELS, _device, _Loop, _optimise,
-                                           _valid_targets, iou, load_pretrained, plot_history)
+                                           _valid_targets, iou, load_pretrained, plot_history, sensor_augment)
 
 
 def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev, config=None,
@@ -28,9 +28,9 @@ def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, d
     """Images and targets of a batch. Augmentation: horizontal flips; and with a depth channel, the
     colours shuffled, scaled or greyed out (a quarter of the images each), so the detector learns
     handles from their shape in depth as well as from their look; with chance ``depth_noise``, the
-    depth as a real sensor gives it (`sim.perturb.sensor_depth`: noise growing with distance, holes
-    at edges and on dark surfaces; a level of ``SENSOR_LEVELS`` and a frame count of
-    ``SENSOR_FRAMES`` drawn per image), so that the relief channel is not trusted beyond what it holds."""
+    depth as a real sensor gives it (:func:`~opend_mj.policy.learned.train.sensor_augment`: noise
+    growing with distance, holes at edges and on dark surfaces), so that the relief channel is not
+    trusted beyond what it holds."""
     import torch
 
     from opend_mj.policy.learned.detector import DetectorConfig, detector_input, detector_targets
@@ -46,11 +46,8 @@ def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, d
             b = tgt["boxes"].clone()
             w = rec["width"]
             tgt["boxes"] = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], 1) if len(b) else b
-        if augment and config.depth and depth_noise > 0 and rng.random() < depth_noise:
-            from opend_mj.sim.perturb import sensor_depth
-
-            depth = sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), rng.choice(SENSOR_LEVELS),
-                                 rng.getrandbits(31), rng.choice(SENSOR_FRAMES))
+        if augment and config.depth:
+            depth = sensor_augment(rgb, depth, rng, depth_noise)
         x = detector_input(rgb, depth, config)
         if augment and config.depth:
             r = rng.random()

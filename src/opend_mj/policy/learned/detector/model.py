@@ -72,7 +72,8 @@ def depth_relief(depth: np.ndarray, holes: bool = True) -> np.ndarray:
         d = np.where(read, d, 10.0).astype(np.float32)
         return np.clip((uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE, -1.0, 1.0)
     w = uniform_filter(read.astype(np.float32), RELIEF_WINDOW, mode="nearest")
-    mean = uniform_filter(np.where(read, d, 0.0).astype(np.float32), RELIEF_WINDOW, mode="nearest") / np.maximum(w, 1e-6)
+    total = uniform_filter(np.where(read, d, 0.0).astype(np.float32), RELIEF_WINDOW, mode="nearest")
+    mean = total / np.maximum(w, 1e-6)  # over the pixels with a reading
     relief = np.where(read & (w > 0), (mean - d) / RELIEF_SCALE, 0.0)
     return np.clip(relief, -1.0, 1.0).astype(np.float32)
 
