@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -172,3 +173,52 @@ def test_the_final_sort_never_drops_a_line_written_meanwhile(tmp_path, monkeypat
     lines = out.read_text().splitlines()
     assert foreign.strip() in lines and len(lines) == 4
     assert [json.loads(ln)["joint"] for ln in lines] == ["k", "j0", "j1", "j2"]
+
+
+class _FirstLook:
+    """An agent that keeps the depth of its first observation and stops."""
+
+    name = "first-look"
+
+    def reset(self, episode):
+        self.depth = None
+
+    def act(self, obs):
+        self.depth = obs["depth"]
+        return None
+
+
+def test_an_agents_first_depth_under_a_sensor_fuses_the_still_frames(small_dataset):
+    """Under depth_noise the first observation, of the still scene, is the planner's fused image:
+    fewer holes and less noise than one sensor frame of the same render, and nominal is exact."""
+    from dataclasses import replace
+
+    from opend_mj.evaluation.agents import run_agent_episode
+    from opend_mj.evaluation.jobs import make_jobs
+    from opend_mj.evaluation.runner import make_episode_env
+    from opend_mj.sim.envs import SceneReader
+
+    job = make_jobs(small_dataset, ["franka"], "oracle", split="all")[0]
+    looks = {}
+    for perturb in (None, "depth_noise=strong"):
+        noisy_job = replace(job, perturb=perturb)
+        env = make_episode_env(noisy_job)
+        try:
+            agent = _FirstLook()
+            run_agent_episode(noisy_job, env, agent)
+            env.reset()
+            reader = SceneReader(env, env.task.config.image_size)
+            try:
+                single = reader.render()[1]
+            finally:
+                reader.close()
+        finally:
+            env.close()
+        looks[perturb] = (agent.depth, single)
+    exact, single_exact = looks[None]
+    assert np.array_equal(exact, single_exact)
+    fused, single = looks["depth_noise=strong"]
+    seen = exact > 0
+    assert (fused[seen] == 0).mean() < 0.5 * (single[seen] == 0).mean()
+    both = seen & (fused > 0) & (single > 0)
+    assert np.median(np.abs(fused - exact)[both]) < 0.6 * np.median(np.abs(single - exact)[both])

@@ -158,12 +158,12 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
                        action_high=high, seed=episode_seed(job))
     camera = reader.camera_arrays()
 
-    def observe(with_images: bool) -> dict:
+    def observe(with_images: bool, frames: int = 1) -> dict:
         obs = reader.proprio()
         obs["instruction"] = task.instruction
         obs.update(camera)
         if with_images:
-            obs["rgb"], obs["depth"] = reader.render()
+            obs["rgb"], obs["depth"] = reader.render(frames)
         return obs
 
     video = None
@@ -174,7 +174,9 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     hand_closest = reach() if closest < reach.span + reach.cap else reach.cap
     steps, stopped, diverged = 0, False, False
     try:
-        obs = observe(True)  # before the video's renderer opens (one renderer at a time: the planner's image)
+        # before the video's renderer opens (one renderer at a time). The scene is still before the
+        # first action: its depth is the sensor's fused over `depth_frames` frames, as the planner's
+        obs = observe(True, frames=config.depth_frames)
         video = VideoRecorder(job, physics, config, task.cabinet.bounds) if job.video_dir else None
         agent.reset(info)
         while steps < max_steps:

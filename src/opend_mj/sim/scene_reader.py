@@ -165,12 +165,13 @@ class SceneReader:
             SceneReader._rendering = self
         return self._camera
 
-    def render(self) -> tuple[np.ndarray, np.ndarray]:
+    def render(self, frames: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """(rgb uint8 HxWx3, depth float32 HxW metres) of the current state (the depth as the
-        task's sensor gives it: `OpenCabinetTask.sense_depth`)."""
+        task's sensor gives it: `OpenCabinetTask.sense_depth`; ``frames`` > 1: that many sensor
+        frames of a still scene, fused)."""
         rgb, depth = self._renderer().render()
         sense = getattr(self.env.task, "sense_depth", None)
-        return rgb, (depth if sense is None else sense(rgb, depth))
+        return rgb, (depth if sense is None else sense(rgb, depth, frames=frames))
 
     def render_rgb(self) -> np.ndarray:
         return self._renderer().render_rgb()
