@@ -186,6 +186,20 @@ class _Loop:
         self.out.with_suffix(".json").write_text(json.dumps(
             {k: v for k, v in ckpt.items() if k not in ("model", "text")}, indent=1, default=str) + "\n")
 
+    def end_epoch(self, epoch: int, row: dict, started: float, summary: str, model, optimiser, scheduler,
+                  payload: dict, metric: str | None, stopped: bool, max_minutes: float | None) -> bool:
+        """An epoch's close: its wall time (s, from ``started``) counted, ``row`` kept in the history
+        and logged after ``summary``, the state and (when best) the checkpoint saved. True where
+        training stops here (the time limit was reached)."""
+        self.trained_seconds += time.time() - started
+        row["seconds"] = round(time.time() - started, 1)
+        self.history.append(row)
+        self.log(f"epoch {epoch + 1}: {summary}  ({row['seconds']:.0f} s)")
+        self.save(epoch, model, optimiser, scheduler, payload, metric=metric)
+        if stopped:
+            self.log(f"stopped: time limit of {max_minutes} min reached")
+        return stopped
+
 
 def plot_history(history: list[dict], out_png: Path, title: str, metric: str) -> Path:
     import matplotlib
@@ -404,21 +418,16 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                 for p, (ri, ti) in zip(prob, chunk):
                     box = np.asarray(val_recs[ri]["targets"][ti]["box"]) * (config.image_size / val_recs[ri]["width"])
                     hits.append(cliport_hits(p, box))
-        loop.trained_seconds += time.time() - t0
         row = {"epoch": epoch + 1, "train_loss": float(np.mean(losses)) if losses else float("nan"),
-               "val_loss": float(np.sum(vl) / max(1, len(val_pairs))), "val_centre_in_box": float(np.mean(hits)) if hits else float("nan"),
-               "train_seconds": round(train_seconds, 1), "seconds": round(time.time() - t0, 1),
-               "batches": len(losses), "complete": not stopped}
-        loop.history.append(row)
-        log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
-            f"val centre-in-box {row['val_centre_in_box']:.3f}  ({row['seconds']:.0f} s)")
-        loop.save(epoch, model, opt, sched, {"config": asdict(config), "text": text.state(),
-                                             "data": str(data_dir), "pos_weight": pos_weight,
-                                             "depth_noise": depth_noise,
-                                             **({"init": str(init)} if init else {})},
-                  metric="val_centre_in_box")
-        if stopped:
-            log(f"stopped: time limit of {max_minutes} min reached")
+               "val_loss": float(np.sum(vl) / max(1, len(val_pairs))),
+               "val_centre_in_box": float(np.mean(hits)) if hits else float("nan"),
+               "train_seconds": round(train_seconds, 1), "batches": len(losses), "complete": not stopped}
+        summary = (f"train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
+                   f"val centre-in-box {row['val_centre_in_box']:.3f}")
+        payload = {"config": asdict(config), "text": text.state(), "data": str(data_dir), "pos_weight": pos_weight,
+                   "depth_noise": depth_noise, **({"init": str(init)} if init else {})}
+        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, "val_centre_in_box", stopped,
+                          max_minutes):
             break
     plot_history(loop.history, loop.out.with_name(loop.out.stem + "_curve.png"), "CLIPort-style affordance model",
                  "val_centre_in_box")

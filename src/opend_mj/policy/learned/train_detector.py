@@ -191,20 +191,15 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
                 m = evaluate_detector_model(model, data_dir, val_recs, threshold, sensor=SENSOR_LEVELS[-1])
                 row.update({"val_target_recall_sensor": m["target_recall"],
                             "val_target_recall_mean": 0.5 * (row["val_target_recall"] + m["target_recall"])})
-        loop.trained_seconds += time.time() - t0
-        row["seconds"] = round(time.time() - t0, 1)
-        loop.history.append(row)
-        log(f"epoch {epoch + 1}: train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
-            f"val target recall {row.get('val_target_recall', float('nan')):.3f}  "
-            f"handle recall {row.get('val_handle_recall', float('nan')):.3f}"
-            + (f"  under the strong sensor {row['val_target_recall_sensor']:.3f}" if "val_target_recall_sensor" in row
-               else "") + f"  ({row['seconds']:.0f} s)")
+        summary = (f"train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
+                   f"val target recall {row.get('val_target_recall', float('nan')):.3f}  "
+                   f"handle recall {row.get('val_handle_recall', float('nan')):.3f}"
+                   + (f"  under the strong sensor {row['val_target_recall_sensor']:.3f}"
+                      if "val_target_recall_sensor" in row else ""))
         metric = next((k for k in ("val_target_recall_mean", "val_target_recall") if k in row), None)
-        loop.save(epoch, model, opt, sched, {"config": asdict(config), "data": str(data_dir), "threshold": threshold,
-                                             "depth_noise": depth_noise, **({"init": str(init)} if init else {})},
-                  metric=metric)
-        if stopped:
-            log(f"stopped: time limit of {max_minutes} min reached")
+        payload = {"config": asdict(config), "data": str(data_dir), "threshold": threshold,
+                   "depth_noise": depth_noise, **({"init": str(init)} if init else {})}
+        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, metric, stopped, max_minutes):
             break
     plot_history(loop.history, loop.out.with_name(loop.out.stem + "_curve.png"),
                  f"Faster R-CNN ({config.backbone})", "val_target_recall")
