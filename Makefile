@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real robustness robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-hands robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -71,15 +71,20 @@ eval-real: install
 		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json \
 		--manifest $(REAL_CABINETS)/manifest.json
 
-## Robustness (docs/robustness.md): nominal and every perturbation axis at both levels, for the solvers in
-## ROBUST_SOLVERS with the hands in ROBUST_HANDS. `robustness`: the generated test split (records and table
-## under results/robustness/); `robustness-real`: your compiled PartNet-Mobility folder as for eval-real
-## (records under build/, only the table's counts in results/real/robustness_<split><tag>.json).
-ROBUST_SOLVERS ?= --solver oracle --solver fasterrcnn --solver cliport
+## Robustness (docs/robustness.md): nominal and every perturbation axis at both levels, for the solvers
+## and agents in ROBUST_SOLVERS (the BC policy too) with the hands in ROBUST_HANDS. `robustness`: the
+## generated test split (records and table under results/robustness/); `robustness-real`: your compiled
+## PartNet-Mobility folder as for eval-real (records under build/, only the table's counts in
+## results/real/robustness_<split><tag>.json).
+ROBUST_SOLVERS ?= --solver oracle --solver fasterrcnn --solver cliport --policy bc
 ROBUST_HANDS ?= --hand allegro --hand franka
 robustness: install
 	$(BIN)/opend robustness $(ROBUST_SOLVERS) $(ROBUST_HANDS) --split test --workers $(WORKERS) $(RUN_ARGS) \
 		--records results/robustness --out results/robustness/generated
+## End to end with Faster R-CNN, all four hands, every axis at both levels (the bands' check per hand).
+robustness-hands: install
+	$(BIN)/opend robustness --solver fasterrcnn $(HANDS) --split test --workers $(WORKERS) \
+		--records results/robustness --out results/robustness/hands
 ## The robust baseline under depth noise (docs/robustness.md): Faster R-CNN and the detector trained on
 ## the depth sensor's images (fasterrcnn-sensor), all four hands, nominal and depth_noise at both levels.
 robustness-depth: install
