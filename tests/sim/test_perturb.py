@@ -258,3 +258,21 @@ def test_sensor_depth_is_a_seeded_draw_and_fusing_frames_fills_holes():
     assert (eight == 0).sum() < (one == 0).sum()
     flat = (slice(45, 60), slice(5, 60))
     assert np.std(eight[flat][eight[flat] > 0]) < np.std(one[flat][one[flat] > 0])
+
+
+def test_robustness_summary_gives_each_entry_its_worst_drops():
+    """docs/results.md's robustness rows: per solver and hand, the largest drop at each level and where,
+    and the conditions beyond their band."""
+    from opend_mj.evaluation.robustness import table_summary_markdown
+
+    def cell(rate, delta, ok=True):
+        return {"rate": rate, "ci95": [rate - 5, rate + 5], "successes": int(rate), "episodes": 100,
+                "delta": delta, "within_band": ok}
+
+    table = {"bands": {"mild": 5.0, "strong": 15.0}, "rows": [{"solver": "fasterrcnn", "hand": "allegro",
+             "conditions": {"nominal": {"rate": 90.0, "ci95": [85.0, 95.0], "successes": 90, "episodes": 100},
+                            "light=mild": cell(89.0, -1.0), "light=strong": cell(84.0, -6.0),
+                            "depth_noise=mild": cell(88.0, -2.0), "depth_noise=strong": cell(70.0, -20.0, False)}}]}
+    row = next(line for line in table_summary_markdown(table).splitlines() if line.startswith("| fasterrcnn"))
+    assert row.split(" | ")[2:] == ["2", "90.0 [85.0-95.0] (90/100)", "-2.0 (`depth_noise`)",
+                                    "-20.0 (`depth_noise`)", "`depth_noise=strong` |"]

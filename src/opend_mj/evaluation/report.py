@@ -271,8 +271,10 @@ EXPERT_RESULTS = ("expert/*", "real/expert_*")
 
 def robustness_sections(results_dir: Path) -> list[str]:
     """The robustness tables (`opend robustness`): generated (results/robustness/*.json) and real
-    (results/real/robustness_*.json, counts only), each with the label of the run that made it."""
-    from opend_mj.evaluation.robustness import load_table, table_markdown
+    (results/real/robustness_*.json, counts only), each summarised per solver and hand
+    (`robustness.table_summary_markdown`) with the label of the run that made it; every cell is in
+    the table beside the JSON (``.md`` for generated cabinets, ``.png`` for both)."""
+    from opend_mj.evaluation.robustness import load_table, table_summary_markdown
 
     results_dir = Path(results_dir)
     out = []
@@ -280,9 +282,11 @@ def robustness_sections(results_dir: Path) -> list[str]:
                          ("real cabinets", sorted((results_dir / "real").glob("robustness_*.json")))):
         for path in paths:
             table = load_table(path)
-            out += [table_markdown(table, f"Robustness, {title} (`{path.relative_to(results_dir.parent)}`)"),
+            full = [p.relative_to(results_dir.parent).as_posix() for p in (path.with_suffix(".md"),
+                                                                           path.with_suffix(".png")) if p.is_file()]
+            out += [table_summary_markdown(table, f"Robustness, {title} (`{path.relative_to(results_dir.parent)}`)"),
                     f"Made by: `{table.get('command') or 'opend robustness'}` ({table.get('label', '')}); "
-                    "docs/robustness.md.", ""]
+                    f"every cell: {', '.join(f'`{p}`' for p in full) or 'the JSON'}; docs/robustness.md.", ""]
     return out
 
 

@@ -140,6 +140,31 @@ def table_markdown(table: dict, title: str = "Robustness") -> str:
     return "\n".join(lines) + "\n"
 
 
+def table_summary_markdown(table: dict, title: str = "Robustness") -> str:
+    """One row per (solver, hand): the nominal cell, the largest drop under a mild and under a strong
+    level (points against nominal, and where), and how many conditions fall outside their band; the
+    full table (`table_markdown`) has every cell."""
+    b = table["bands"]
+    lines = [f"## {title}", "",
+             f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (successes/episodes) at nominal; "
+             f"the largest drop in points under a mild and a strong level; the conditions beyond their band "
+             f"({b['mild']:g} points mild, {b['strong']:g} strong).", "",
+             "| solver / agent | hand | axes | nominal | worst mild | worst strong | outside the bands |",
+             "|---|---|---|---|---|---|---|"]
+    for row in table["rows"]:
+        conds = row["conditions"]
+        axes = sorted({name.split("=")[0] for name in conds if "=" in name}, key=AXES.index)
+        worst = []
+        for level in LEVELS:
+            drops = [(c["delta"], name.split("=")[0]) for name, c in conds.items()
+                     if name.endswith(f"={level}") and "delta" in c]
+            worst.append(f"{min(drops)[0]:+.1f} (`{min(drops)[1]}`)" if drops else "-")
+        outside = [name for name, c in conds.items() if c.get("within_band") is False]
+        lines.append(f"| {row['solver']} | {row['hand']} | {len(axes)} | {_cell_text(conds.get('nominal'))} | "
+                     + " | ".join(worst) + f" | {', '.join(f'`{n}`' for n in outside) or 'none'} |")
+    return "\n".join(lines) + "\n"
+
+
 def plot_table(table: dict, path: Path) -> Path:
     """Success per condition against nominal (dashed), one panel per hand, one series per solver or
     agent, with 95 % intervals; the conditions the table measured only."""
