@@ -360,3 +360,28 @@ def test_a_bar_is_measured_through_depth_noise():
     assert shape.gap == pytest.approx(0.025, abs=0.006), shape
     _, blind = measure(noisy, replace(PerceptionConfig(), noise_floor=1.0))  # noise taken for none
     assert blind.gap > 0.035, blind
+
+
+def test_noise_is_no_neighbour_but_a_neighbour_still_is():
+    """Under depth noise a lone pixel read a centimetre proud of the panel is no obstacle: the free
+    space around a handle alone on its panel stays the search radius on every side. A real
+    neighbour (a second handle beside it) is still found through the same noise."""
+    from opend_mj.policy.perception import PerceptionConfig, estimate_handle, measure_handle
+
+    view = _view()
+    config = PerceptionConfig()
+    bar, posts = _bar(thickness=0.014, gap=0.025, z=-0.05)
+    box = _box_of(view, *bar)
+    rng = np.random.default_rng(0)
+
+    def measure(parts):
+        exact = _render(view, parts)
+        noisy = exact + rng.normal(scale=0.003, size=exact.shape)
+        handle = estimate_handle(box, noisy, view, config)
+        return measure_handle(handle, box, noisy, view, config)
+
+    alone = measure([bar] + posts)
+    assert min(alone.clear.values()) == pytest.approx(config.search_radius), alone.clear
+    other, other_posts = _bar(thickness=0.014, gap=0.025, z=0.03)
+    beside = measure([bar] + posts + [other] + other_posts)
+    assert beside.clear["up"] < 0.1 and beside.clear["down"] == pytest.approx(config.search_radius), beside.clear

@@ -60,6 +60,9 @@ class PerceptionConfig:
     #: are the handle's own; an obstacle counts for a side (up / down / left / right) when within
     #: ``neighbour_band`` (m) of the handle's extent across that side
     neighbour_protrusion: float = 0.008
+    #: under depth noise a neighbour stands ``neighbour_noise_depth`` sigmas more out of the panel
+    #: (`HandleEstimate.noise`): a lone noisy pixel is no obstacle
+    neighbour_noise_depth: float = 3.0
     handle_margin: float = 0.01
     neighbour_band: float = 0.03
     #: handle pixels in and around a solver's box stand ``snap_protrusion`` (m, min, max) out of the

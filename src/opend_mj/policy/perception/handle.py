@@ -86,7 +86,7 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
     protrusion = max(0.0, panel_x - handle.front_x)
     gap = max(0.0, protrusion - thickness)
     # neighbours: anything else standing out of the panel near the handle
-    proud = ok & (x < panel_x - config.neighbour_protrusion) & ~in_box
+    proud = ok & (x < panel_x - config.neighbour_protrusion - config.neighbour_noise_depth * handle.noise) & ~in_box
     m = config.handle_margin
     grown = (uu >= box.u0 - m * px_per_m) & (uu <= box.u1 + m * px_per_m) & \
             (vv >= box.v0 - m * px_per_m) & (vv <= box.v1 + m * px_per_m)
