@@ -142,8 +142,8 @@ def table_markdown(table: dict, title: str = "Robustness") -> str:
 
 def table_summary_markdown(table: dict, title: str = "Robustness") -> str:
     """One row per (solver, hand): the nominal cell, the largest drop under a mild and under a strong
-    level (points against nominal, and where), and how many conditions fall outside their band; the
-    full table (`table_markdown`) has every cell."""
+    level (points against nominal, and where), and the conditions outside their band; the full
+    table (`table_markdown`) has every cell."""
     b = table["bands"]
     lines = [f"## {title}", "",
              f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (successes/episodes) at nominal; "
@@ -158,7 +158,11 @@ def table_summary_markdown(table: dict, title: str = "Robustness") -> str:
         for level in LEVELS:
             drops = [(c["delta"], name.split("=")[0]) for name, c in conds.items()
                      if name.endswith(f"={level}") and "delta" in c]
-            worst.append(f"{min(drops)[0]:+.1f} (`{min(drops)[1]}`)" if drops else "-")
+            if drops:
+                delta, axis = min(drops)
+                worst.append(f"{delta:+.1f} (`{axis}`)")
+            else:
+                worst.append("-")
         outside = [name for name, c in conds.items() if c.get("within_band") is False]
         lines.append(f"| {row['solver']} | {row['hand']} | {len(axes)} | {_cell_text(conds.get('nominal'))} | "
                      + " | ".join(worst) + f" | {', '.join(f'`{n}`' for n in outside) or 'none'} |")

@@ -14,8 +14,8 @@ The interface `opend run --policy module:Class` evaluates (see the README's "Eva
 (3 x 3) and ``camera_pose`` (4 x 4, camera to world; columns right, up, backward), ``rgb`` (H x W x 3
 uint8) and ``depth`` (H x W float32, metres) on the first step (every step with ``images =
 "every_step"``; under a depth sensor the first step's depth fuses ``TaskConfig.depth_frames`` frames
-of the still scene, as the planner's first image does), and the hand's own state: ``hand_qpos``, ``hand_qvel`` (finger joints, in
-``hand_spec.joint_names`` order), ``root_pos``, ``root_quat``, ``root_vel`` (the free joint's
+of the still scene, as the planner's first image does), and the hand's own state: ``hand_qpos``,
+``hand_qvel`` (finger joints, in ``hand_spec.joint_names`` order), ``root_pos``, ``root_quat``, ``root_vel`` (the free joint's
 velocity), ``grasp_site_pos``, ``grasp_site_quat``, ``mocap_pos``, ``mocap_quat`` (the root pose
 being commanded) and ``time`` (s). No cabinet joint, handle pose or target type is in it.
 

@@ -126,6 +126,7 @@ class _Loop:
         self.out = Path(out)
         self.state_path = Path(state_path) if state_path else default_state_path(self.out)
         self.epochs = epochs
+        self.max_minutes = max_minutes
         self.deadline = time.time() + 60 * max_minutes if max_minutes else None
         self.progress = progress
         self.log = log
@@ -187,17 +188,18 @@ class _Loop:
             {k: v for k, v in ckpt.items() if k not in ("model", "text")}, indent=1, default=str) + "\n")
 
     def end_epoch(self, epoch: int, row: dict, started: float, summary: str, model, optimiser, scheduler,
-                  payload: dict, metric: str | None, stopped: bool, max_minutes: float | None) -> bool:
+                  payload: dict, metric: str | None, stopped: bool) -> bool:
         """An epoch's close: its wall time (s, from ``started``) counted, ``row`` kept in the history
         and logged after ``summary``, the state and (when best) the checkpoint saved. True where
         training stops here (the time limit was reached)."""
-        self.trained_seconds += time.time() - started
-        row["seconds"] = round(time.time() - started, 1)
+        seconds = time.time() - started
+        self.trained_seconds += seconds
+        row["seconds"] = round(seconds, 1)
         self.history.append(row)
         self.log(f"epoch {epoch + 1}: {summary}  ({row['seconds']:.0f} s)")
         self.save(epoch, model, optimiser, scheduler, payload, metric=metric)
         if stopped:
-            self.log(f"stopped: time limit of {max_minutes} min reached")
+            self.log(f"stopped: time limit of {self.max_minutes} min reached")
         return stopped
 
 
@@ -282,7 +284,6 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
             instruction = mirror_instruction(instruction)
         if augment:
             instruction = training_instruction(instruction, rng, config.reword)
-        if augment:
             depth = sensor_augment(rgb, depth, rng, depth_noise)
         x = prepare_image(rgb.copy(), depth.copy(), config.image_size)
         yt = torch.from_numpy(np.ascontiguousarray(y))[None, None]
@@ -426,8 +427,7 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                    f"val centre-in-box {row['val_centre_in_box']:.3f}")
         payload = {"config": asdict(config), "text": text.state(), "data": str(data_dir), "pos_weight": pos_weight,
                    "depth_noise": depth_noise, **({"init": str(init)} if init else {})}
-        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, "val_centre_in_box", stopped,
-                          max_minutes):
+        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, "val_centre_in_box", stopped):
             break
     plot_history(loop.history, loop.out.with_name(loop.out.stem + "_curve.png"), "CLIPort-style affordance model",
                  "val_centre_in_box")

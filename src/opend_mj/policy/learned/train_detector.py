@@ -199,7 +199,7 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
         metric = next((k for k in ("val_target_recall_mean", "val_target_recall") if k in row), None)
         payload = {"config": asdict(config), "data": str(data_dir), "threshold": threshold,
                    "depth_noise": depth_noise, **({"init": str(init)} if init else {})}
-        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, metric, stopped, max_minutes):
+        if loop.end_epoch(epoch, row, t0, summary, model, opt, sched, payload, metric, stopped):
             break
     plot_history(loop.history, loop.out.with_name(loop.out.stem + "_curve.png"),
                  f"Faster R-CNN ({config.backbone})", "val_target_recall")
