@@ -86,7 +86,7 @@ def _choose(hand, boxes, handle_box_world, instruction="top drawer", kind="drawe
 
 @pytest.mark.parametrize("hand", ["allegro", "shadow"])
 def test_thin_bar_close_to_the_panel_is_pinched(hand):
-    bar, posts = _bar(thickness=0.008, gap=0.008)
+    bar, posts = _bar(thickness=0.008, gap=0.008, z=0.3)  # 30 cm up: not a handle near the floor
     handle, shape, grasp = _choose(hand, [bar, *posts], bar)
     assert handle.kind == "bar" and handle.orientation == "horizontal"
     assert shape.thickness == pytest.approx(0.008, abs=0.004)
@@ -98,7 +98,8 @@ def test_thin_bar_close_to_the_panel_is_pinched(hand):
 def test_wide_bar_with_room_behind_is_hooked(hand):
     bar, posts = _bar(thickness=0.014, gap=0.03, length=0.25)
     # the synthetic scene sits at z = 0: not a handle near the floor
-    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift=0.0, min_grasp_height=None)
+    handle, shape, grasp = _choose(hand, [bar, *posts], bar, low_handle_lift=0.0, min_grasp_height=None,
+                                   hook_down_pitches=())
     assert handle.kind == "bar"
     assert shape.thickness == pytest.approx(0.014, abs=0.005)
     assert shape.gap == pytest.approx(0.03, abs=0.008)
@@ -162,11 +163,13 @@ def test_horizontal_door_bar_under_a_neighbour_is_grasped_fingers_down(hand):
     high = {"grasp.flip_below": -1.0}  # the synthetic scene sits at z = 0: not a handle near the floor
     bar, posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.0)
     other, other_posts = _bar(thickness=0.012, gap=0.02, length=0.25, y=0.1, z=0.06)
-    _, shape, grasp = _choose(hand, [bar, *posts, other, *other_posts], bar, "bottom right door", kind="door", overrides=high)
+    floorless = {"hook_down_pitches": ()}  # nor hooked from above
+    _, shape, grasp = _choose(hand, [bar, *posts, other, *other_posts], bar, "bottom right door", kind="door",
+                              overrides=high, **floorless)
     assert shape.clear["up"] < 0.08 and shape.clear["down"] > 0.1
     fingers = quat_to_mat(grasp.quat)[:, 1]  # the open fingers point along site +y
     assert fingers[2] < -0.9
-    _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", overrides=high)
+    _, _, alone = _choose(hand, [bar, *posts], bar, "bottom right door", kind="door", overrides=high, **floorless)
     assert quat_to_mat(alone.quat)[:, 1][2] > 0.9
 
 

@@ -63,9 +63,36 @@ def test_hook_down_pitches_are_checked_when_the_hand_file_is_read(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("target", "style"), [(LOW_BAR_DOOR, "hook_down"), (PRESSED_BAR_DOOR, "press_down")])
-def test_a_real_door_with_its_bar_near_the_floor_opens_with_the_gripper(real_episode, target, style):
-    rec = real_episode(*target, "franka")
+@pytest.mark.parametrize(("target", "hand", "style"), [(LOW_BAR_DOOR, "franka", "hook_down"),
+                                                     (PRESSED_BAR_DOOR, "franka", "press_down"),
+                                                     (PRESSED_BAR_DOOR, "allegro", "press_down")])
+def test_a_real_door_with_its_bar_near_the_floor_opens(real_episode, target, hand, style):
+    """The gripper, and the Allegro whose open fingers would stop on the floor short of the bar."""
+    rec = real_episode(*target, hand)
     assert rec["grasp_style"] == style
     assert rec["success"] and rec["range_ratio"] > 0.75, rec
     assert rec["others_moved"] == []
+
+
+def test_the_allegros_open_fingers_give_a_little_on_the_floor(grasp_scenes):
+    """The Allegro's open fingers point down at a low bar and reach below its grasp site: where they
+    would reach more than the hand's ``floor_give`` below the floor they stop on it, short of the
+    bar, and the hand presses on the bar's top instead; where they only graze it (a bar 5.2 cm up,
+    1.4 mm into the floor) they bend and slide, and the hook stays."""
+    from opend_mj.sim.hands import get_hand
+
+    h = grasp_scenes
+    give = get_hand("allegro").planner.floor_give
+    assert give > 0.0
+    low, low_posts = h._bar(thickness=0.01, gap=0.016, length=0.12, z=0.04)
+    floor = next(e["no_clear_pose"][0] for e in h._choose_events("allegro", [low, *low_posts], low)
+                 if "no_clear_pose" in e)
+    assert floor < -give
+    assert h._choose("allegro", [low, *low_posts], low, "door", kind="door")[2].style == "press_down"
+    grazing, posts = h._bar(thickness=0.01, gap=0.016, length=0.12, z=0.052)
+    floor = next(e["no_clear_pose"][0] for e in h._choose_events("allegro", [grazing, *posts], grazing)
+                 if "no_clear_pose" in e)
+    assert -give < floor < 0.0
+    assert h._choose("allegro", [grazing, *posts], grazing, "door", kind="door")[2].style == "hook"
+    stiff = h._choose("allegro", [grazing, *posts], grazing, "door", kind="door", floor_give=0.0)[2]
+    assert stiff.style == "press_down"

@@ -13,14 +13,15 @@ import pytest
 SLIDING_PANEL = ("45855", "joint_0")
 
 
-def _planner_and_grasp(h, hand: str):
-    """A planner that chose its grasp on a vertical bar of a drawer (synthetic depth), and that grasp."""
+def _planner_and_grasp(h, hand: str, bar_and_posts=None):
+    """A planner that chose its grasp on a drawer's bar (synthetic depth; a vertical bar unless
+    ``bar_and_posts`` are given), and that grasp."""
     from opend_mj.policy.perception import estimate_handle
     from opend_mj.policy.planner import Observation, Planner, PlannerConfig, PlanResult
     from opend_mj.policy.solvers import get_solver
     from opend_mj.sim.hands import load_spec
 
-    bar, posts = h._bar(thickness=0.016, gap=0.035, length=0.3, z=0.5, orientation="vertical")
+    bar, posts = bar_and_posts or h._bar(thickness=0.016, gap=0.035, length=0.3, z=0.5, orientation="vertical")
     view = h._view()
     depth = h._render(view, [bar, *posts])
     box = h._box_of(view, *bar)
@@ -93,3 +94,27 @@ def test_a_real_sliding_panel_opens_with_the_allegro(real_episode):
     assert rec["pull_end"][0] == "stuck"  # pulled out first, it did not come
     assert rec["success"] and rec["range_ratio"] > 0.75, rec
     assert rec["others_moved"] == []
+
+
+def test_a_panel_pressed_from_above_is_pressed_again_at_the_depth_it_was_seen(grasp_scenes):
+    """A low bar pressed from above (the Allegro's open fingers would stop on the floor) whose panel
+    did not come out: the press slid off toward the camera, but the bar is as deep as it was seen;
+    only its place along the front is taken from where it was last held."""
+    from opend_mj.policy.planner import PullState
+
+    h = grasp_scenes
+    bar, posts = h._bar(thickness=0.01, gap=0.016, length=0.12, z=0.04)
+    planner, handle, shape, g, result = _planner_and_grasp(h, "allegro", (bar, posts))
+    assert g.style == "press_down"
+    state = PullState(quat0=g.quat)
+    state.last_held = (g.pos + np.array([-0.05, 0.02, 0.0]), g.quat)
+    state.slides = [np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0])]
+    assert planner.slide.next_slide(state, result)
+    again = planner.grasping.next_grasp(g, handle, shape, state, result)
+    assert again.style == "press_down"
+    assert again.pos[0] == pytest.approx(g.pos[0]) and again.pos[1] == pytest.approx(g.pos[1] + 0.02)
+    # a drawer that came out (no slide): pressed again where it was last held
+    state.slides = None
+    came_out = planner.grasping.next_grasp(g, handle, shape, state, result)
+    assert came_out.pos[0] == pytest.approx(g.pos[0] - 0.05)
+

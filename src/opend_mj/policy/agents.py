@@ -124,7 +124,9 @@ class _ObservedRobot:
         return self.obs["hand_qpos"]
 
     def contact_touch(self) -> dict[str, float]:
-        """What the hand feels per part (the ``touch`` observation; `opend_mj.sim.hands.HandTouch`)."""
+        """What the hand feels per part (the ``touch`` observation; `opend_mj.sim.hands.HandTouch`).
+        The observation does not say where a part is pressed, so a press on the floor counts here
+        (the planner's own `Robot` leaves those out)."""
         return touch_dict(touch_parts(self.spec), self.obs["touch"])
 
     def step(self, site_pos, site_quat, fingers) -> None:

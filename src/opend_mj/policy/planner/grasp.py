@@ -89,7 +89,7 @@ class Grasping(Stage):
             quat, pre, cleared = self.clear_pose(handle, shape, level, quat, pos, pre, result)
             # from above only where the floor is in the way (a bar higher up whose fingers only
             # touch the panel behind it is grasped level: they stop on the panel)
-            near_floor = clear[1] < self.hand.clearance_margin
+            near_floor = clear[1] < self.hand.clearance_margin - self.hand.floor_give
             down = self.hook_down_pose(handle, shape, result) if handle.kind == "bar" and near_floor and not cleared else None
             if down is not None:
                 (quat, pos, pre, on_top), press = down, self.hand.press_depth
@@ -322,6 +322,8 @@ class Grasping(Stage):
             style = g.style
             if state.last_held is not None:
                 pos[:2] = np.asarray(state.last_held[0], float)[:2]
+                if state.slides is not None:  # a panel that did not come out: its bar is as deep as seen
+                    pos[0] = self.episode.first_pos[0]
             elif g.press:
                 style = "press_down"
             new = GraspChoice(style, g.orientation, g.quat, pos, g.pre, g.closed,

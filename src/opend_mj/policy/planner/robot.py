@@ -7,7 +7,12 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.sim.hands import HandSpec, HandTouch, grasp_pose_to_root_pose
+from opend_mj.policy.planner.clearance import FLOOR_Z
 from opend_mj.transforms import mat_to_quat
+
+#: The band above the floor (m) where a touch is the floor's: no handle reaches that low (the
+#: lowest stand 2-3 cm above it).
+FLOOR_BAND = 0.005
 
 
 class Robot:
@@ -61,8 +66,10 @@ class Robot:
         return self._data.ctrl[self._finger_ctrl].copy()
 
     def contact_touch(self) -> dict[str, float]:
-        """Normal force (N) on each part of the hand from things that are not the hand (`HandTouch`)."""
-        return self._touch.read()
+        """Normal force (N) on each part of the hand from things that are not the hand (`HandTouch`),
+        leaving out presses within `FLOOR_BAND` of the floor: fingers that brush the floor below a
+        low handle do not feel like a grip on it."""
+        return self._touch.read(above=FLOOR_Z + FLOOR_BAND)
 
     def step(self, site_pos, site_quat, fingers) -> None:
         """One control step toward a grasp-site target pose (converted to the root target)."""

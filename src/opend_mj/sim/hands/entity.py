@@ -190,11 +190,13 @@ class HandTouch:
         #: contacts at once. Pyramidal cones decode the force from the pyramid's edges: `vector`.
         self._elliptic = int(self._m.opt.cone) == int(mujoco.mjtCone.mjCONE_ELLIPTIC)
 
-    def vector(self) -> np.ndarray:
-        """Force per part, in `parts` order (0: the part touches nothing)."""
-        return self.vector_from(self._d.contact)
+    def vector(self, above: float | None = None) -> np.ndarray:
+        """Force per part, in `parts` order (0: the part touches nothing). ``above`` (world z, m):
+        only contacts at or above this height (a skin that says where it is touched: a press
+        lower down is on the floor, not a handle)."""
+        return self.vector_from(self._d.contact, above)
 
-    def vector_reference(self) -> np.ndarray:
+    def vector_reference(self, above: float | None = None) -> np.ndarray:
         """`vector` one contact at a time through ``mj_contactForce`` (the reference; any cone)."""
         m, d = self._m, self._d
         force = np.zeros(len(self.parts))
@@ -203,23 +205,25 @@ class HandTouch:
             c = d.contact[i]
             g1, g2 = int(c.geom1), int(c.geom2)
             h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
-            if h1 == h2:
+            if h1 == h2 or (above is not None and float(c.pos[2]) < above):
                 continue
             self._mj_contact_force(m, d, i, self._force6)
             force[self._geom_part.get(g1 if h1 else g2, other)] += abs(float(self._force6[0]))
         return force
 
-    def vector_from(self, contact) -> np.ndarray:
+    def vector_from(self, contact, above: float | None = None) -> np.ndarray:
         """`vector` from the step's contact list (``data.contact``, read once by the caller), without
         a Python loop over contacts: the same forces, summed per part in contact order (bincount adds
-        in index order, as the loop does), so the same numbers to the bit."""
+        in index order, as the loop does), so the same numbers to the bit. ``above``: see `vector`."""
         if not len(contact.geom1):
             return np.zeros(len(self.parts))
         if not self._elliptic and int(np.max(contact.dim)) > 1:
-            return self.vector_reference()
+            return self.vector_reference(above)
         g1, g2, adr = contact.geom1, contact.geom2, contact.efc_address
         h1, h2 = self._hand_geom[g1], self._hand_geom[g2]
         mixed = h1 != h2
+        if above is not None:
+            mixed = mixed & (contact.pos[:, 2] >= above)
         if not mixed.any():
             return np.zeros(len(self.parts))
         adr = adr[mixed]
@@ -227,9 +231,10 @@ class HandTouch:
         parts = self._part_of_geom[np.where(h1[mixed], g1[mixed], g2[mixed])]
         return np.bincount(parts, weights=np.abs(force), minlength=len(self.parts))
 
-    def read(self) -> dict[str, float]:
-        """Force per part that feels any, by part name (what the planner and agents read)."""
-        return touch_dict(self.parts, self.vector())
+    def read(self, above: float | None = None) -> dict[str, float]:
+        """Force per part that feels any, by part name (what the planner and agents read);
+        ``above``: see `vector`."""
+        return touch_dict(self.parts, self.vector(above))
 
 
 def touch_dict(parts, forces) -> dict[str, float]:

@@ -130,7 +130,9 @@ class HandPlannerConfig:
     ``press_depth`` (m; 0: never): where the gap behind such a bar is too narrow for the closed
     fingers, the same pose comes down on the bar's top instead and presses this far below it
     (the grasp style "press_down"): the friction of that press, not a hook, pulls the bar out.
-    Hooks are preferred over presses.
+    Hooks are preferred over presses. ``floor_give`` (m): how far the open fingers of a grasp pose
+    may reach below the floor and still close on the bar (they bend back and slide on it); only a
+    pose that reaches deeper counts as near the floor for the hook or press from above.
 
     ``flap_min_radius_share`` (or None: ``DoorConfig.flap_min_radius_share``): the least radius of a
     flap's circle, as a share of the distance from the handle to the front's far edge seen in depth
@@ -167,6 +169,7 @@ class HandPlannerConfig:
     hook_down_depth: float = 0.005
     hook_down_margin: float = 0.001
     press_depth: float = 0.0
+    floor_give: float = 0.0
     flap_min_radius_share: float | None = None
     yaw_rate: float | None = None
 
