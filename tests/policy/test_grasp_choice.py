@@ -388,3 +388,24 @@ def test_noise_is_no_neighbour_but_a_neighbour_still_is():
     other, other_posts = _bar(thickness=0.014, gap=0.025, z=0.03)
     beside = measure([bar] + posts + [other] + other_posts)
     assert beside.clear["up"] < 0.1 and beside.clear["down"] == pytest.approx(config.search_radius), beside.clear
+
+
+def test_a_handle_at_a_doors_bottom_edge_stands_on_the_door_not_on_the_room_behind():
+    """A vertical bar at a door's bottom right corner whose box reaches below the door's edge, where
+    the camera sees the room 20 cm farther: the panel behind the bar is the door's front (the room
+    is more than ``panel_max_behind`` behind the bar), and the door hinges on its far (left) side."""
+    from opend_mj.policy.perception import estimate_handle, infer_hinge_side, measure_handle
+    from opend_mj.policy.perception.config import PerceptionConfig
+
+    view = _view()
+    door_front = PANEL_X - 0.2
+    door = ((door_front, -0.3, -0.08), (door_front + 0.02, 0.3, 0.3))  # its bottom edge at z = -0.08
+    bar = ((door_front - 0.03, -0.27, -0.1), (door_front - 0.015, -0.255, -0.02))  # 2 cm below it
+    posts = [((door_front - 0.015, -0.266, z - 0.004), (door_front, -0.259, z + 0.004)) for z in (-0.07, -0.03)]
+    depth = _render(view, [door, bar, *posts])
+    box = _box_of(view, *bar)
+    config = PerceptionConfig()
+    handle = estimate_handle(box, depth, view, config)
+    assert handle.panel_x == pytest.approx(door_front, abs=0.01)
+    assert measure_handle(handle, box, depth, view, config).protrusion == pytest.approx(0.03, abs=0.01)
+    assert infer_hinge_side(handle, depth, view, config) == "left"

@@ -37,6 +37,9 @@ class PerceptionConfig:
     front_noise_shift: float = 1.88
     bar_noise_depth: float = 2.0
     panel_percentile: float = 95.0
+    #: the panel behind a handle is at most this far (m) behind the handle's front: depths farther in
+    #: and around its box (the floor below a door's bottom edge, the room beside the cabinet) are not it
+    panel_max_behind: float = 0.1
     #: largest half-thickness of a bar: the grip centre is the front seen in depth plus this (m)
     handle_radius: float = 0.007
     #: handles whose box aspect (long / short, on the handle's plane) is below ``knob_aspect`` and

@@ -62,7 +62,7 @@ def measure_handle(handle: "HandleEstimate", box: HandleBox, depth: np.ndarray, 
     px_per_m = _px_per_m(view, *box.centre, handle.front_x)
     uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(radius * px_per_m)), config)
     x = np.where(ok, pts[..., 0], np.inf)
-    panel_x = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, config)
+    panel_x = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, config, handle.front_x)
     panel_x = max(panel_x if panel_x is not None else handle.panel_x, handle.front_x)
     # the bar: pixels in the box within a few mm of the handle's front
     bar = in_box & (x < handle.front_x + config.bar_depth + config.bar_noise_depth * handle.noise)
@@ -127,12 +127,13 @@ def _window(box: HandleBox, depth: np.ndarray, view, margin_px: int, config: Per
 
 
 def _panel_around(x: np.ndarray, ok: np.ndarray, in_box: np.ndarray, uu: np.ndarray, vv: np.ndarray,
-                  box: HandleBox, px_per_m: float, config: PerceptionConfig) -> float | None:
+                  box: HandleBox, px_per_m: float, config: PerceptionConfig, front_x: float) -> float | None:
     """The panel's x: the most common depth (median) of the pixels in a band ``panel_band`` (m)
-    wide just around the box (a tight box may hold only the bar); None where fewer than
-    ``panel_min_pixels``."""
+    wide just around the box (a tight box may hold only the bar), no more than ``panel_max_behind``
+    behind the handle's front ``front_x`` (m); None where fewer than ``panel_min_pixels``."""
     g = config.panel_band * px_per_m
     ring = ok & ~in_box & (uu >= box.u0 - g) & (uu <= box.u1 + g) & (vv >= box.v0 - g) & (vv <= box.v1 + g)
+    ring &= x <= front_x + config.panel_max_behind
     return float(np.median(x[ring])) if ring.sum() >= config.panel_min_pixels else None
 
 
@@ -268,7 +269,8 @@ def estimate_handle(box: HandleBox, depth: np.ndarray, view,
     front_x = float(np.percentile(xs, config.front_percentile))
     noise = _depth_noise(box, depth, view, front_x, config)
     front_x += config.front_noise_shift * noise
-    panel_x = float(np.percentile(xs, config.panel_percentile))
+    behind = xs[xs <= front_x + config.panel_max_behind]
+    panel_x = float(np.percentile(behind if len(behind) else xs, config.panel_percentile))
     uc, vc = box.centre
     around = _panel_behind_tight_box(box, depth, view, xs, front_x, config)
     if around is not None:
@@ -309,7 +311,7 @@ def _panel_behind_tight_box(box: HandleBox, depth: np.ndarray, view, xs: np.ndar
     px_per_m = _px_per_m(view, *box.centre, front_x)
     uu, vv, ok, pts, in_box = _window(box, depth, view, int(math.ceil(config.panel_band * px_per_m)) + 1, config)
     x = np.where(ok, pts[..., 0], np.inf)
-    panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, config)
+    panel = _panel_around(x, ok, in_box, uu, vv, box, px_per_m, config, front_x)
     if panel is None or panel <= front_x:
         return None
     if float(np.mean(np.abs(xs - panel) < config.panel_near)) >= config.panel_share:
