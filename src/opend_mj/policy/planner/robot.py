@@ -6,8 +6,8 @@ from typing import Callable
 
 import numpy as np
 
-from opend_mj.sim.hands import HandSpec, HandTouch, grasp_pose_to_root_pose
 from opend_mj.policy.planner.clearance import FLOOR_Z
+from opend_mj.sim.hands import HandSpec, HandTouch, grasp_pose_to_root_pose
 from opend_mj.transforms import mat_to_quat
 
 #: The band above the floor (m) where a touch is the floor's: no handle reaches that low (the
