@@ -18,3 +18,19 @@ def drawer_cabinet(tmp_path_factory) -> Path:
     src = write_source(cabinet, root / "src")
     compile_cabinet(src, root / "built", cache_dir=root / "cache")
     return root / "built" / cabinet.id
+
+
+@pytest.fixture
+def drawer_job(drawer_cabinet):
+    """An oracle episode of ``drawer_cabinet``'s first drawer for a hand: ``drawer_job(hand)``."""
+    import json
+
+    from opend_mj.evaluation.episode import EpisodeJob
+
+    joint = json.loads((drawer_cabinet / "cabinet.json").read_text())["targets"][0]["joint"]
+
+    def job(hand: str) -> EpisodeJob:
+        return EpisodeJob(cabinet=drawer_cabinet.name, cabinet_dir=str(drawer_cabinet), joint=joint, split="train",
+                          hand=hand, solver="oracle", use_grasp_file=False)
+
+    return job

@@ -4,21 +4,10 @@ a pull). The touch observation agents read is unchanged."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
 
-def _job(cab: Path, hand: str):
-    from opend_mj.evaluation.episode import EpisodeJob
-
-    joint = json.loads((cab / "cabinet.json").read_text())["targets"][0]["joint"]
-    return EpisodeJob(cabinet=cab.name, cabinet_dir=str(cab), joint=joint, split="train", hand=hand,
-                      solver="oracle", use_grasp_file=False)
-
-
-def test_fingers_pressed_on_the_floor_are_no_grip(drawer_cabinet):
+def test_fingers_pressed_on_the_floor_are_no_grip(drawer_job):
     from opend_mj.evaluation.runner import make_episode_env
     from opend_mj.policy.planner import Robot
     from opend_mj.policy.planner.approach import Approach
@@ -27,7 +16,7 @@ def test_fingers_pressed_on_the_floor_are_no_grip(drawer_cabinet):
     from opend_mj.sim.hands import HandTouch, get_hand
     from opend_mj.transforms import mat_to_quat
 
-    env = make_episode_env(_job(drawer_cabinet, "allegro"))
+    env = make_episode_env(drawer_job("allegro"))
     try:
         env.reset()
         robot = Robot(env)

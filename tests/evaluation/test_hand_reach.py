@@ -3,26 +3,16 @@ fingers reached the handle is never graded as failing the approach."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import pytest
 
-from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.grading import failure_stage
 
 
-def _job(cab: Path, hand: str) -> EpisodeJob:
-    joint = json.loads((cab / "cabinet.json").read_text())["targets"][0]["joint"]
-    return EpisodeJob(cabinet=cab.name, cabinet_dir=str(cab), joint=joint, split="train", hand=hand,
-                      solver="oracle", use_grasp_file=False)
-
-
-def test_the_hand_far_from_the_handle_reads_the_cap(drawer_cabinet):
+def test_the_hand_far_from_the_handle_reads_the_cap(drawer_job):
     from opend_mj.evaluation.probes import HandReach
     from opend_mj.evaluation.runner import make_episode_env
 
-    env = make_episode_env(_job(drawer_cabinet, "allegro"))
+    env = make_episode_env(drawer_job("allegro"))
     env.reset()
     reach = HandReach(env.task, env.physics)
     assert reach() == reach.cap  # the start pose is well away from the cabinet
@@ -30,10 +20,10 @@ def test_the_hand_far_from_the_handle_reads_the_cap(drawer_cabinet):
 
 
 @pytest.mark.parametrize("hand", ["allegro", "franka"])
-def test_a_held_handle_is_recorded_as_reached(drawer_cabinet, hand):
+def test_a_held_handle_is_recorded_as_reached(drawer_job, hand):
     from opend_mj.evaluation.runner import run_episode
 
-    record = run_episode(_job(drawer_cabinet, hand))
+    record = run_episode(drawer_job(hand))
     assert record["success"]
     assert record["hand_to_handle"] < 0.002  # fingers on the handle when the pull started
 
