@@ -25,19 +25,21 @@ def grasp_scenes():
 
 @pytest.fixture
 def real_episode(tmp_path):
-    """``run(cabinet_id, joint, hand)``: compile that cabinet of ``../shared/opend-train`` into a
-    temporary folder and run one oracle episode on it; its record (one without an error). Skips
-    where the cabinet is not there."""
-    def run(cid: str, joint: str, hand: str) -> dict:
+    """``run(cabinet_id, joint, hand, overrides=())``: compile that cabinet of
+    ``../shared/opend-train`` into a temporary folder (once) and run one oracle episode on it, with
+    ``overrides`` (``(dotted name, value)`` pairs) of the planner's configuration; its record (one
+    without an error). Skips where the cabinet is not there."""
+    def run(cid: str, joint: str, hand: str, overrides: tuple = ()) -> dict:
         from opend_mj.assets.compiler import compile_cabinet
         from opend_mj.evaluation.episode import EpisodeJob
         from opend_mj.evaluation.runner import run_episode
 
         if not (SHARED_TRAIN / cid / "mobility.urdf").is_file():
             pytest.skip(f"real data missing: no {cid} in ../shared/opend-train")
-        compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
+        if not (tmp_path / "built" / cid).is_dir():
+            compile_cabinet(SHARED_TRAIN / cid, tmp_path / "built", cache_dir=tmp_path / "cache")
         rec = run_episode(EpisodeJob(cabinet=cid, cabinet_dir=str(tmp_path / "built" / cid), joint=joint,
-                                     split="all", hand=hand, solver="oracle"))
+                                     split="all", hand=hand, solver="oracle", planner_overrides=tuple(overrides)))
         assert "error" not in rec, rec.get("error")
         return rec
 

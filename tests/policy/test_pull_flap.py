@@ -252,6 +252,46 @@ def test_a_procedural_flap_opens_with_the_planner(tmp_path, index, cid, joint):
     assert not all(side_door)  # pulled as a side door, not both hands open it this far
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+@pytest.mark.parametrize("radius", [0.4, 0.3])
+def test_a_lost_flaps_swing_is_read_from_its_held_path_not_from_the_hands_pitch(sign, radius):
+    """A flap held up to 50 degrees (hinged at its top or bottom), whose hand pitched on to 85
+    before the lost grip was noticed: it swung 50 degrees, read on the circle about the front's far
+    edge (40 cm from the handle), and never more where its own hinge is nearer (the flap is pushed
+    on, not taken as open)."""
+    from opend_mj.policy.planner.records import Flap
+
+    planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("allegro"))
+    start = np.array([-0.03, 0.0, START_Z])
+    state = PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]), peak_tilt=85.0 * sign)
+    state.flap = Flap(start=start, out=np.array([-1.0, 0.0, 0.0]), sign=sign, reach=0.4)
+    state.track = [start + radius * np.array([-math.sin(a), 0.0, sign * (1.0 - math.cos(a))])
+                   for a in np.radians(np.linspace(0.0, 50.0, 11))]
+    swung = planner.recovery.swung(state)
+    assert state.swung() == 85.0
+    assert (swung == pytest.approx(50.0, abs=0.1)) if radius == 0.4 else 30.0 < swung < 50.0
+    state.flap = None
+    assert planner.recovery.swung(state) == 85.0
+
+
+#: flaps whose bar the Allegro's fingers lose part way: one hinged at its top edge 43 cm above its bar
+#: (at 55-65 degrees), one hinged at its bottom edge 64 cm below it (at 40-50 degrees)
+LOST_FLAPS = [("46166", "joint_2"), ("47024", "joint_0")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("target", LOST_FLAPS, ids=["top-hinged", "bottom-hinged"])
+def test_a_real_flap_lost_part_way_is_pushed_open_by_its_inside(real_episode, target):
+    """A flap the hand lost part way stays where it was let go; the hand goes round its free edge
+    and pushes it by its inside past 75 % of its range, by contact alone. Without the push it
+    stays short."""
+    rec = real_episode(*target, "allegro")
+    assert rec["pushed"] and rec["success"] and rec["range_ratio"] >= 0.75, rec
+    assert rec["others_moved"] == []
+    held = real_episode(*target, "allegro", overrides=(("recovery.flap_push_min_deg", 180.0),))
+    assert not held["pushed"] and 0.2 < held["range_ratio"] < 0.75, held
+
+
 def test_a_tall_flap_is_seen_at_the_second_look():
     """A drop-down front hinged 85 cm below its handle has turned only 5-6 degrees when the hand
     came 8 cm out, too little for the first look; the second, at 16 cm, sees it and the flap is pulled

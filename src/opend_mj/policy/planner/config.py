@@ -277,6 +277,10 @@ class RecoveryConfig:
     #: hand goes round the free edge ahead of the angle the front is seen turned where that is
     #: more than the held path's (``Planner.door_seen_turn``)
     push_look: bool = True
+    #: a flap lost after opening at least ``flap_push_min_deg`` (deg) is pushed open by its inside
+    #: to ``flap_push_to_deg`` (deg)
+    flap_push_min_deg: float = 20.0
+    flap_push_to_deg: float = 100.0
 
 
 @dataclass(frozen=True)

@@ -269,14 +269,16 @@ class Planner(Stage):
                 status = "slipped"
                 if not self.slide.next_slide(state, result):
                     break
-            if status == "slipped" and (state.swung() >= cfg.pulling.door_done_deg if door
+            if status == "slipped" and (self.recovery.swung(state) >= cfg.pulling.door_done_deg if door
                                         else state.travelled >= cfg.pulling.drawer_done):
                 status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
             if status == "done":
                 break
             if door and cfg.recovery.push_recovery:
                 arc = self.recovery.door_arc(state)
-                if arc is not None and math.degrees(arc[4]) >= cfg.recovery.push_min_turn:
+                flap = self.recovery.flap_arc(state)
+                if arc is not None and math.degrees(arc[4]) >= cfg.recovery.push_min_turn \
+                        or flap is not None and math.degrees(flap[2]) >= cfg.recovery.flap_push_min_deg:
                     self.approach.back_off(robot, grasp)
                     break  # an opened door is pushed open from inside (below), not grasped again
             self.approach.back_off(robot, grasp)

@@ -4,6 +4,10 @@ The hinge comes from the handle's held path (a circle fitted through it) where t
 hinge seen in depth, else from the hinge seen in depth. The hand, closed to a fist, goes round the
 door's free edge into the gap between door and cabinet, palm toward the door's inside, and sweeps
 along the arc, pushing the door open by contact alone.
+
+A flap that was lost part way stays where it was let go (it is counterbalanced), its
+inside facing down and out (hinged at its top) or up and out (at its bottom); the hand goes round its
+free edge the same way and pushes it on by its inside along its circle about the front's far edge.
 """
 
 from __future__ import annotations
@@ -64,6 +68,8 @@ class PushRecovery(Stage):
         if self.ctx.time_left(robot) < cfg.push_min_time:
             result.events.append({"push_skipped": {"time_left": round(self.ctx.time_left(robot), 2)}})
             return False
+        if state.flap is not None:
+            return self.push_flap(robot, state, result)
         arc = self.door_arc(state)
         if arc is None:
             return False
@@ -108,15 +114,88 @@ class PushRecovery(Stage):
         rho = radius * cfg.push_radius_fraction
         c = point(rho, phi_in)
         move(robot, a, c, palm_quat(phi_in), fist, speed)
-        # sweep: the palm meets the door's inside and pushes it along the arc
-        phi = phi_in
-        phi_end = math.radians(cfg.push_to_deg)
+        self._sweep(robot, point, palm_quat, fist, rho, phi_in, math.radians(cfg.push_to_deg), result)
+        return True
+
+    def _sweep(self, robot, point, palm_quat, fist, rho: float, phi: float, phi_end: float,
+               result: PlanResult) -> None:
+        """The palm meets the part's inside and pushes it along its arc at the pull speed: the
+        site at ``point(rho, angle)``, oriented ``palm_quat(angle)``, from ``phi`` to ``phi_end``
+        (rad) or until the time is up."""
         dphi = self.config.pulling.speed / rho * robot.control_dt
         while phi < phi_end and self.ctx.time_left(robot) > 0.0:
             phi = min(phi_end, phi + dphi)
             robot.step(point(rho, phi), palm_quat(phi), fist)
         result.pushed = True
         result.events.append({"pushed_to_deg": round(math.degrees(phi), 1)})
+
+    def flap_arc(self, state: PullState):
+        """(hinge point (m), the held handle's radius (m), how far it opened (rad)) of a flap, on
+        the circle about the front's far edge (the largest radius it can have,
+        :class:`~.records.Flap`: the angle is never over-estimated, where a radius fitted to a path
+        the hand slid along is too small) through the held path's last point; None where no flap
+        was seen."""
+        flap = state.flap
+        if flap is None or len(state.track) < 2:
+            return None
+        radius = flap.reach
+        centre = np.asarray(flap.start, float) + np.array([0.0, 0.0, flap.sign * radius])
+        d = np.asarray(state.track[-1], float) - centre
+        return centre, radius, math.atan2(float(d[:2] @ flap.out[:2]), -flap.sign * float(d[2]))
+
+    def swung(self, state: PullState) -> float:
+        """How far (deg) a door swung while held: a flap as far as its held path opened it (the
+        hand's pitch runs on after a lost grip until the slip is noticed; a flap stays where it was
+        let go), else :meth:`PullState.swung`."""
+        arc = self.flap_arc(state)
+        return state.swung() if arc is None else math.degrees(arc[2])
+
+    def push_flap(self, robot, state: PullState, result: PlanResult) -> bool:
+        """Push a flap that was lost after opening ``flap_push_min_deg`` or more open by its inside
+        (from below one hinged at its top, from above one hinged at its bottom): round its free
+        edge (``push_clearance`` beyond the handle's radius, ``push_edge_deg`` ahead of it), into
+        the wedge between flap and cabinet at ``push_entry_fraction`` of its angle and
+        ``push_radius_fraction`` of the handle's radius from the hinge, then on along the circle to
+        ``flap_push_to_deg``. False where no flap was seen or it opened too little."""
+        cfg = self.config.recovery
+        arc = self.flap_arc(state)
+        if arc is None:
+            return False
+        centre, radius, opened = arc
+        if math.degrees(opened) < cfg.flap_push_min_deg:
+            result.events.append({"push_skipped": {"flap_opened_deg": round(math.degrees(opened), 1)}})
+            return False
+        out = state.flap.out
+        self.ctx.enter(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
+                       opened_deg=round(math.degrees(opened), 1), flap=True)
+
+        sign = state.flap.sign
+
+        def point(rho, phi):
+            return centre + rho * (math.sin(phi) * out + np.array([0.0, 0.0, -sign * math.cos(phi)]))
+
+        def palm_quat(phi):
+            radial = math.sin(phi) * out + np.array([0.0, 0.0, -sign * math.cos(phi)])
+            tangent = math.cos(phi) * out + np.array([0.0, 0.0, sign * math.sin(phi)])  # the opening direction
+            return mat_to_quat(np.column_stack([radial, np.cross(tangent, radial), tangent]))
+
+        fist = self.grasping.closed_profile("horizontal")
+        site, squat = robot.site_pose()
+        speed = self.config.approach.approach_speed * cfg.push_speed_factor
+        edge = opened + math.radians(cfg.push_edge_deg)
+        b = point(radius + cfg.push_clearance, edge)
+        move(robot, site, site + cfg.push_step_back * out, squat, fist, self.config.approach.move_speed)
+        move(robot, robot.site_pos(), b, palm_quat(edge), fist, self.config.approach.move_speed)
+        phi_in = opened * cfg.push_entry_fraction
+        # round the free edge on the circle, not along its chord (which would cut across the edge)
+        arc = np.linspace(edge, phi_in, max(2, int(math.ceil(math.degrees(edge - phi_in) / 10.0)) + 1))
+        for p0, p1 in zip(arc[:-1], arc[1:]):
+            move(robot, point(radius + cfg.push_clearance, p0), point(radius + cfg.push_clearance, p1),
+                 palm_quat(p1), fist, speed)
+        a = point(radius + cfg.push_clearance, phi_in)
+        rho = radius * cfg.push_radius_fraction
+        move(robot, a, point(rho, phi_in), palm_quat(phi_in), fist, speed)
+        self._sweep(robot, point, palm_quat, fist, rho, phi_in, math.radians(cfg.flap_push_to_deg), result)
         return True
 
     def door_seen_turn(self, robot):
