@@ -261,7 +261,8 @@ class RecoveryConfig:
     #: one seen in depth and its radius is in ``push_radius_range`` (m)
     hinge_agreement: float = 0.12
     push_radius_range: tuple = (0.12, 1.2)
-    #: the hand goes round the door's free edge ``push_clearance`` (m) beyond the handle's radius,
+    #: the hand goes round the door's free edge ``push_clearance`` (m) beyond the handle's radius
+    #: or the door's width seen in depth, whichever is larger,
     #: ``push_edge_deg`` ahead of the door, after stepping ``push_step_back`` (m) out of the cabinet;
     #: it enters the gap at ``push_entry_fraction`` of the door's angle, ``push_radius_fraction`` of
     #: the handle's radius from the hinge, at ``push_speed_factor`` times the approach speed, and

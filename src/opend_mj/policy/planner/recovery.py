@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from opend_mj.policy.perception import door_edges
 from opend_mj.policy.planner.moves import move
 from opend_mj.policy.planner.records import PlanResult, PullState
 from opend_mj.policy.planner.stage import Stage, StageContext
@@ -99,7 +100,8 @@ class PushRecovery(Stage):
 
         fist = self.grasping.closed_profile("vertical")
         site, squat = robot.site_pose()
-        out = radius + cfg.push_clearance
+        # beyond the door's free edge, which may be well beyond its handle
+        out = max(radius, self.door_width(centre) or 0.0) + cfg.push_clearance
         # round the edge ahead of the door as far as it is known to have turned: by the held path or
         # as seen (a grip that slid along the bar leaves a path that turned less than the door)
         edge = max(opened, seen or 0.0) + math.radians(cfg.push_edge_deg)
@@ -137,6 +139,21 @@ class PushRecovery(Stage):
             robot.step(point(rho, phi), palm_quat(phi), fist)
         result.pushed = True
         result.events.append({"pushed_to_deg": round(math.degrees(phi), 1)})
+
+    def door_width(self, centre) -> float | None:
+        """The distance (m) from the hinge ``centre`` (x, y) to the door's free edge, where its front
+        plane ends along the handle's row in the first depth image on the handle's side
+        (:func:`~opend_mj.policy.perception.door_edges`); None where unseen. A handle can sit well
+        inside its door's edge (a 1 m door with its bar 30 cm from it)."""
+        handle, first = self.episode.handle, self.episode.first
+        if handle is None or first is None or first.depth is None:
+            return None
+        edges = door_edges(handle, first.depth, first.camera_view, self.config.perception)
+        if edges is None:
+            return None
+        side = float(handle.centre[1]) - float(centre[1])
+        edge = edges[0] if side > 0 else edges[1]  # (+y, -y) ends
+        return abs(float(edge) - float(centre[1]))
 
     def flap_arc(self, state: PullState):
         """(hinge point (m), the held handle's radius (m), how far it opened (rad)) of a flap, on
