@@ -24,6 +24,26 @@ def grasp_scenes():
 
 
 @pytest.fixture
+def door_plane():
+    """``plane(lo, hi)``: (view, depth) of a 256 px camera (fovy 45 degrees) at the origin looking
+    along +x, and a door's front plane 1 m ahead from y = ``lo`` to ``hi`` and 0.3 m above and below
+    its centre, the room 2.5 m away around it."""
+    import numpy as np
+
+    from opend_mj.sim.camera import CameraIntrinsics, CameraView
+
+    def plane(lo: float, hi: float):
+        rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
+        view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
+        cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
+        on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))
+        inside = (on_plane[:, 1] > lo) & (on_plane[:, 1] < hi) & (np.abs(on_plane[:, 2]) < 0.3)
+        return view, np.where(inside, 1.0, 2.5).reshape(256, 256)
+
+    return plane
+
+
+@pytest.fixture
 def real_episode(tmp_path):
     """``run(cabinet_id, joint, hand, overrides=())``: compile that cabinet of
     ``../shared/opend-train`` into a temporary folder (once) and run one oracle episode on it, with

@@ -192,7 +192,7 @@ def test_infer_hinge_side_from_depth(handle_y, panel, expected, knob):
     assert infer_hinge_side(handle, depth, view) == expected
 
 
-def test_the_push_recovery_goes_round_the_doors_own_edge_not_just_beyond_its_handle():
+def test_the_push_recovery_goes_round_the_doors_own_edge_not_just_beyond_its_handle(door_plane):
     """A door 0.5 m wide (its front from y = -0.3 to 0.2) hinged at y = -0.3, its bar 0.35 m from
     the hinge: the push goes round the edge the depth image shows, 0.5 m from the hinge. With the
     hinge at the other edge the width is measured to the other side."""
@@ -202,11 +202,7 @@ def test_the_push_recovery_goes_round_the_doors_own_edge_not_just_beyond_its_han
     from opend_mj.policy.solvers import get_solver
     from opend_mj.sim.hands import load_spec
 
-    view = _forward_view()
-    cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
-    on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))
-    inside = (on_plane[:, 1] > -0.3) & (on_plane[:, 1] < 0.2) & (np.abs(on_plane[:, 2]) < 0.3)
-    depth = np.where(inside, 1.0, 2.5).reshape(256, 256)
+    view, depth = door_plane(-0.3, 0.2)
     handle = HandleEstimate(centre=np.array([0.96, 0.05, 0.0]), orientation="vertical", kind="bar",
                             size=(0.015, 0.2), front_x=0.953, panel_x=1.0)
     planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("franka"))

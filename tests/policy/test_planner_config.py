@@ -178,21 +178,15 @@ def test_the_planner_keeps_its_episode_state_in_one_record():
             "ctx", "solver", "front", "approach", "kind", "flap", "slide", "grasping"}
 
 
-def test_the_hinge_side_is_inferred_only_where_configured():
+def test_the_hinge_side_is_inferred_only_where_configured(door_plane):
     """A single door (no side in the instruction): the hinge side comes from depth where
     ``infer_hinge`` is on, and is unknown where it is off; a side the instruction names stands."""
     from types import SimpleNamespace
 
     from opend_mj.policy.perception import HandleEstimate
     from opend_mj.policy.planner import Planner, PlannerConfig
-    from opend_mj.sim.camera import CameraIntrinsics, CameraView
 
-    rot = np.column_stack([(0, -1, 0), (0, 0, 1), (-1, 0, 0)]).astype(float)
-    view = CameraView(CameraIntrinsics.from_fovy(45, 256, 256), np.zeros(3), rot)
-    cols, rows = np.meshgrid(np.arange(256) + 0.5, np.arange(256) + 0.5)
-    on_plane = view.backproject(cols.ravel(), rows.ravel(), np.ones(cols.size))
-    inside = (on_plane[:, 1] > -0.3) & (on_plane[:, 1] < 0.2) & (np.abs(on_plane[:, 2]) < 0.3)
-    depth = np.where(inside, 1.0, 2.5).reshape(256, 256)
+    view, depth = door_plane(-0.3, 0.2)
     handle = HandleEstimate(centre=np.array([0.96, 0.15, 0.0]), orientation="vertical", kind="bar",
                             size=(0.015, 0.2), front_x=0.953, panel_x=1.0)
     obs = SimpleNamespace(instruction="door", depth=depth, camera_view=view)
