@@ -5,9 +5,9 @@ hinge seen in depth, else from the hinge seen in depth. The hand, closed to a fi
 door's free edge into the gap between door and cabinet, palm toward the door's inside, and sweeps
 along the arc, pushing the door open by contact alone.
 
-A flap that was lost part way stays where it was let go (it is counterbalanced), its
-inside facing down and out (hinged at its top) or up and out (at its bottom); the hand goes round its
-free edge the same way and pushes it on by its inside along its circle about the front's far edge.
+A flap that was lost part way stays where it was let go (it is counterbalanced), its inside facing
+down and out (hinged at its top) or up and out (at its bottom); the hand goes round its free edge the
+same way and pushes it on by its inside along its circle about the front's far edge.
 """
 
 from __future__ import annotations
@@ -156,8 +156,8 @@ class PushRecovery(Stage):
         return abs(float(edge) - float(centre[1]))
 
     def flap_arc(self, state: PullState):
-        """(hinge point (m), the held handle's radius (m), how far it opened (rad)) of a flap, on
-        the circle about the front's far edge (the largest radius it can have,
+        """(hinge point (m), the handle's radius (m), how far it opened (rad)) of a flap, on the
+        circle about the front's far edge (the largest radius it can have,
         :class:`~.records.Flap`: the angle is never over-estimated, where a radius fitted to a path
         the hand slid along is too small) through the held path's last point; None where no flap
         was seen."""
@@ -194,7 +194,6 @@ class PushRecovery(Stage):
         out = state.flap.out
         self.ctx.enter(result, "recover", hinge=[round(float(x), 3) for x in centre], radius=round(radius, 3),
                        opened_deg=round(math.degrees(opened), 1), flap=True)
-
         sign = state.flap.sign
 
         def point(rho, phi):
