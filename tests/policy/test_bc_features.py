@@ -73,3 +73,24 @@ def test_percept_gives_a_doors_hinge_line_relative_to_the_handle():
     assert np.allclose(door[-3:], [0.02, 0.35, 1.0])
     assert np.allclose(door[:3], handle.centre)
     assert np.array_equal(door[:11], drawer[:11]) and np.array_equal(door[14:22], drawer[14:22])  # but the side
+
+
+def test_the_agents_step_by_step_actions_are_the_models_own():
+    """The agent's one-sample forward pass (a TorchScript trace of the model, `step_actions`) gives
+    exactly the module's actions, with and without the grasp-style token, for inputs other than
+    those it was traced on; a batch of two goes through the module."""
+    import torch
+
+    from opend_mj.policy.learned.bc import build_model, step_actions
+
+    for modes in (0, 3):
+        model = build_model(30, 12, 9, BCConfig(modes=modes)).eval()
+        lags = len(BCConfig().lags)
+        g = torch.Generator().manual_seed(modes)
+        for _ in range(3):
+            ctx, steps = torch.randn(1, 30, generator=g), torch.randn(1, lags, 12, generator=g)
+            with torch.no_grad():
+                assert torch.equal(step_actions(model, ctx, steps), model.actions(ctx, steps))
+        ctx, steps = torch.randn(2, 30, generator=g), torch.randn(2, lags, 12, generator=g)
+        with torch.no_grad():
+            assert torch.equal(step_actions(model, ctx, steps), model.actions(ctx, steps))

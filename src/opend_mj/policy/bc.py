@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import checkpoint_paths, context_features, decode_action, load_policies, step_features
+from opend_mj.policy.learned.bc import (checkpoint_paths, context_features, decode_action, load_policies, step_actions,
+                                        step_features)
 
 
 def default_checkpoint(hand: str) -> Path:
@@ -137,8 +138,7 @@ class BCAgent:
         t = len(self._steps) - 1
         rows = [max(t - lag, 0) for lag in self.config.lags]
         steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]
-        with torch.no_grad():
-            chunk = np.mean([m.actions(c, steps)[0].numpy() for m, c in zip(self.models, self._ctx)], axis=0)
+        chunk = np.mean([step_actions(m, c, steps)[0].numpy() for m, c in zip(self.models, self._ctx)], axis=0)
         self._preds.append(chunk)
         k = self.config.chunk
         first = max(0, t - k + 1)
