@@ -98,35 +98,35 @@ class PushRecovery(Stage):
             y = np.cross(tangent, radial)
             return mat_to_quat(np.column_stack([radial, y, tangent]))
 
-        fist = self.grasping.closed_profile("vertical")
-        site, squat = robot.site_pose()
-        # beyond the door's free edge, which may be well beyond its handle
+        # beyond the door's free edge, which may be well beyond its handle; ahead of the door as far
+        # as it is known to have turned: by the held path or as seen (a grip that slid along the bar
+        # leaves a path that turned less than the door); across into the gap along the chord
         out = max(radius, self.door_width(centre) or 0.0) + cfg.push_clearance
-        # round the edge ahead of the door as far as it is known to have turned: by the held path or
-        # as seen (a grip that slid along the bar leaves a path that turned less than the door)
         edge = max(opened, seen or 0.0) + math.radians(cfg.push_edge_deg)
-        speed = self.config.approach.approach_speed * cfg.push_speed_factor
-        # round the free edge: out beyond it, across into the gap, in behind the door
-        b = point(out, edge)
-        move(robot, site, site + np.array([-cfg.push_step_back, 0.0, 0.0]), squat, fist, self.config.approach.move_speed)
-        move(robot, robot.site_pos(), b, palm_quat(edge), fist, self.config.approach.move_speed)
-        phi_in = opened * cfg.push_entry_fraction
-        a = point(out, phi_in)
-        move(robot, b, a, palm_quat(phi_in), fist, speed)
-        rho = radius * cfg.push_radius_fraction
-        c = point(rho, phi_in)
-        move(robot, a, c, palm_quat(phi_in), fist, speed)
-        self._sweep(robot, point, palm_quat, fist, rho, phi_in, math.radians(cfg.push_to_deg), result)
+        self._push_round(robot, point, palm_quat, self.grasping.closed_profile("vertical"), np.array([-1.0, 0.0, 0.0]),
+                         out, edge, opened * cfg.push_entry_fraction, radius * cfg.push_radius_fraction,
+                         math.radians(cfg.push_to_deg), None, result)
         return True
 
-    @staticmethod
-    def _round_edge(robot, point, palm_quat, fist, rho: float, phi: float, phi_in: float, speed: float) -> None:
-        """Round the part's free edge on the circle of radius ``rho`` (m) from ``phi`` back to
-        ``phi_in`` (rad) in steps of at most 10 degrees, not along the chord, which cuts inside the
-        circle (by 5 cm for a 40 degree chord 80 cm out) and can catch the edge and shut the part."""
-        arc = np.linspace(phi, phi_in, max(2, int(math.ceil(math.degrees(abs(phi - phi_in)) / 10.0)) + 1))
+    def _push_round(self, robot, point, palm_quat, fist, back, out: float, edge: float, phi_in: float, rho: float,
+                    phi_end: float, arc_step: float | None, result: PlanResult) -> None:
+        """Round a part's free edge and push it open by its inside, the hand a ``fist``: a step of
+        ``push_step_back`` (m) along ``back``, to ``point(out, edge)`` (m, rad) beyond the edge and
+        ahead of the part, across to ``point(out, phi_in)`` (along the circle in steps of at most
+        ``arc_step`` deg, or its chord where None: a long chord cuts inside the circle, by 5 cm for
+        40 degrees 80 cm out, and can catch the edge and shut the part), in to ``point(rho, phi_in)``
+        in the gap, then the sweep (:meth:`_sweep`) to ``phi_end``; oriented ``palm_quat(angle)``."""
+        cfg = self.config.recovery
+        site, squat = robot.site_pose()
+        speed = self.config.approach.approach_speed * cfg.push_speed_factor
+        move(robot, site, site + cfg.push_step_back * back, squat, fist, self.config.approach.move_speed)
+        move(robot, robot.site_pos(), point(out, edge), palm_quat(edge), fist, self.config.approach.move_speed)
+        steps = 1 if arc_step is None else max(1, int(math.ceil(math.degrees(abs(edge - phi_in)) / arc_step)))
+        arc = np.linspace(edge, phi_in, steps + 1)
         for p0, p1 in zip(arc[:-1], arc[1:]):
-            move(robot, point(rho, p0), point(rho, p1), palm_quat(p1), fist, speed)
+            move(robot, point(out, p0), point(out, p1), palm_quat(p1), fist, speed)
+        move(robot, point(out, phi_in), point(rho, phi_in), palm_quat(phi_in), fist, speed)
+        self._sweep(robot, point, palm_quat, fist, rho, phi_in, phi_end, result)
 
     def _sweep(self, robot, point, palm_quat, fist, rho: float, phi: float, phi_end: float,
                result: PlanResult) -> None:
@@ -204,19 +204,10 @@ class PushRecovery(Stage):
             tangent = math.cos(phi) * out + np.array([0.0, 0.0, sign * math.sin(phi)])  # the opening direction
             return mat_to_quat(np.column_stack([radial, np.cross(tangent, radial), tangent]))
 
-        fist = self.grasping.closed_profile("horizontal")
-        site, squat = robot.site_pose()
-        speed = self.config.approach.approach_speed * cfg.push_speed_factor
-        edge = opened + math.radians(cfg.push_edge_deg)
-        b = point(radius + cfg.push_clearance, edge)
-        move(robot, site, site + cfg.push_step_back * out, squat, fist, self.config.approach.move_speed)
-        move(robot, robot.site_pos(), b, palm_quat(edge), fist, self.config.approach.move_speed)
-        phi_in = opened * cfg.push_entry_fraction
-        self._round_edge(robot, point, palm_quat, fist, radius + cfg.push_clearance, edge, phi_in, speed)
-        a = point(radius + cfg.push_clearance, phi_in)
-        rho = radius * cfg.push_radius_fraction
-        move(robot, a, point(rho, phi_in), palm_quat(phi_in), fist, speed)
-        self._sweep(robot, point, palm_quat, fist, rho, phi_in, math.radians(cfg.flap_push_to_deg), result)
+        self._push_round(robot, point, palm_quat, self.grasping.closed_profile("horizontal"), out,
+                         radius + cfg.push_clearance, opened + math.radians(cfg.push_edge_deg),
+                         opened * cfg.push_entry_fraction, radius * cfg.push_radius_fraction,
+                         math.radians(cfg.flap_push_to_deg), 10.0, result)
         return True
 
     def door_seen_turn(self, robot):
