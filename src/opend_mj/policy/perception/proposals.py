@@ -64,25 +64,85 @@ class ProposalConfig:
     noise_floor: float = 0.001
     noise_sigmas: float = 3.0
     noise_min_pixels: int = 6
+    #: Depth so noisy that it raises ``min_protrusion`` is searched again on copies averaged over
+    #: each of these windows (rows, columns of pixels; missing pixels left out), whose noise,
+    #: measured on each copy, is about 1/sqrt(rows x columns) of the image's: a bar 1-3 px wide and
+    #: 30 px long stands out of 8-12 mm of noise once averaged along its length, a knob once averaged
+    #: over its face. Groups found there join the proposals, replacing the smaller ones they overlap
+    #: (the pieces noise cut a bar into; either holds the other's centre); a group there holds at
+    #: least twice a window's pixels (averaged noise comes in blobs of a
+    #: window's size). The averaged copies also propose edges that noise blurred into ridges, so a
+    #: solver uses them only if it can reject a proposal (`NOISE_WINDOWS`). Empty: the image alone.
+    noise_windows: tuple = ()
+
+
+#: The averaging windows of :attr:`ProposalConfig.noise_windows` for a solver whose model scores
+#: each proposal's own box (Faster R-CNN's head): along a vertical bar, along a horizontal one, and
+#: over a knob's face.
+NOISE_WINDOWS = ((9, 1), (1, 9), (3, 3))
 
 
 def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalConfig()) -> list[tuple]:
     """Boxes (u0, v0, u1, v1) and pixel masks of the groups in ``depth`` that look like handles:
     a list of (box, mask), mask a bool array over the box's pixels (rows v0:v1, columns u0:u1)."""
-    from scipy import ndimage
+    from opend_mj.policy.handle import centres_overlap
 
     h, w = depth.shape
     vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
     d = np.where(np.isfinite(depth), depth, np.nanmax(depth[np.isfinite(depth)]) if np.isfinite(depth).any() else 0.0)
     pts = view.backproject(uu.ravel(), vv.ravel(), d.ravel()).reshape(h, w, 3)
+    read = np.isfinite(depth) & (depth > 0)
+    sigma = _front_noise(pts[..., 0], read, config)
+    if config.noise_sigmas * sigma <= config.min_protrusion:  # exact depth, or noise below the threshold
+        return _search(pts, replace(config, min_pixels=max(config.min_pixels, config.noise_min_pixels))
+                       if sigma > 0 else config)
+    out: list = []
+    for rows, cols in ((1, 1), *config.noise_windows):
+        x = pts[..., 0] if rows * cols == 1 else _window_mean(pts[..., 0], read, rows, cols)
+        noise = sigma if rows * cols == 1 else _front_noise(x, read, config, step=cols)
+        found = _search(np.concatenate([x[..., None], pts[..., 1:]], axis=-1), replace(
+            config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * noise),
+            min_pixels=max(config.min_pixels, config.noise_min_pixels, 2 * rows * cols)))
+        for group in found:  # a group replaces the smaller ones it overlaps (pieces noise cut a bar into)
+            if out:
+                held = centres_overlap(np.array([group[0]], float), np.array([b for b, _ in out], float))[0]
+                if any(_area(out[i][0]) >= _area(group[0]) for i in np.nonzero(held)[0]):
+                    continue
+                out = [p for p, h in zip(out, held) if not h]
+            out.append(group)
+    return out
+
+
+def _area(box) -> float:
+    return float((box[2] - box[0]) * (box[3] - box[1]))
+
+
+def _front_noise(x: np.ndarray, read: np.ndarray, config: ProposalConfig, step: int = 1) -> float:
+    """The noise (m) of world x where the camera frames the cabinet (``config.front_window``), from
+    every ``step``-th column (columns averaged together are not independent)."""
+    h, w = x.shape
+    r0, r1, c0, c1 = config.front_window
+    rows, cols = slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1), max(1, int(step)))
+    return pixel_noise(x[rows, cols], read[rows, cols], config.noise_floor)
+
+
+def _window_mean(x: np.ndarray, read: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """``x`` averaged over a ``rows`` x ``cols`` window centred on each pixel, over the pixels with a
+    reading (``read``); a pixel whose window has none keeps its value."""
+    from scipy import ndimage
+
+    size = (int(rows), int(cols))
+    total = ndimage.uniform_filter(np.where(read, x, 0.0), size=size, mode="nearest")
+    count = ndimage.uniform_filter(read.astype(float), size=size, mode="nearest")
+    return np.where(count > 1e-6, total / np.maximum(count, 1e-6), x)
+
+
+def _search(pts: np.ndarray, config: ProposalConfig) -> list[tuple]:
+    """:func:`handle_proposals` on one (H, W, 3) grid of world points, with ``config``'s thresholds."""
+    from scipy import ndimage
+
+    h, w = pts.shape[:2]
     x = pts[..., 0]
-    r0, r1, c0, c1 = config.front_window  # the noise where the camera frames the cabinet
-    rows, cols = slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1))
-    window = depth[rows, cols]
-    sigma = pixel_noise(x[rows, cols], np.isfinite(window) & (window > 0), config.noise_floor)
-    if sigma > 0:
-        config = replace(config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * sigma),
-                         min_pixels=max(config.min_pixels, config.noise_min_pixels))
     # the panel: a median over the window, taken on a grid of every ``stride``-th pixel (25 x 25
     # medians at every pixel cost ~1 s an image; on the grid 1/16 of it) and spread back
     s = max(1, int(config.stride))

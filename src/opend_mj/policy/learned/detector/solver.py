@@ -51,6 +51,10 @@ class MatchConfig:
     #: ``thin_threshold`` or more covers them: both must agree.
     thin: bool = True
     thin_threshold: float = 0.9
+    #: Depth so noisy that handles sink into it (a real sensor 2 m off) is also searched averaged
+    #: along bars and over knobs (:data:`opend_mj.policy.perception.proposals.NOISE_WINDOWS`); the
+    #: head, which scores each proposal's own box, rejects the edges the averaging turns into ridges.
+    noise_windows: bool = True
 
 
 def observed_members(boxes: np.ndarray, observed: tuple) -> list[tuple[int, str]]:
@@ -190,9 +194,11 @@ class FasterRCNNSolver:
             instruction = canonical_instruction(instruction)
         extra = thin = None
         if self.match.use_proposals and depth is not None and camera_view is not None:
-            from opend_mj.policy.perception import handle_proposals, thin_proposals
+            from opend_mj.policy.perception import ProposalConfig, handle_proposals, thin_proposals
+            from opend_mj.policy.perception.proposals import NOISE_WINDOWS
 
-            main = handle_proposals(depth, camera_view)
+            windows = NOISE_WINDOWS if self.match.noise_windows else ()
+            main = handle_proposals(depth, camera_view, ProposalConfig(noise_windows=windows))
             extra = np.array([box for box, _ in main], float).reshape(-1, 4)
             thin = np.array([box for box, _ in (thin_proposals(depth, camera_view, main) if self.match.thin else [])],
                             float).reshape(-1, 4)
