@@ -70,9 +70,9 @@ class ProposalConfig:
     #: 30 px long stands out of 8-12 mm of noise once averaged along its length, a knob once averaged
     #: over its face. Groups found there join the proposals, replacing the smaller ones they overlap
     #: (the pieces noise cut a bar into; either holds the other's centre); a group there holds at
-    #: least twice a window's pixels (averaged noise comes in blobs of a
-    #: window's size). The averaged copies also propose edges that noise blurred into ridges, so a
-    #: solver uses them only if it can reject a proposal (`NOISE_WINDOWS`). Empty: the image alone.
+    #: least twice a window's pixels (averaged noise comes in blobs of a window's size). The averaged
+    #: copies also propose edges that noise blurred into ridges, so a solver uses them only if it can
+    #: reject a proposal (`NOISE_WINDOWS`). Empty: the image alone, as without noise.
     noise_windows: tuple = ()
 
 
@@ -103,8 +103,8 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
         found = _search(np.concatenate([x[..., None], pts[..., 1:]], axis=-1), replace(
             config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * noise),
             min_pixels=max(config.min_pixels, config.noise_min_pixels, 2 * rows * cols)))
-        for group in found:  # a group replaces the smaller ones it overlaps (pieces noise cut a bar into)
-            if out:
+        for group in found:  # an averaged group replaces the smaller ones it overlaps (pieces noise cut a bar into)
+            if out and rows * cols > 1:
                 held = centres_overlap(np.array([group[0]], float), np.array([b for b, _ in out], float))[0]
                 if any(_area(out[i][0]) >= _area(group[0]) for i in np.nonzero(held)[0]):
                     continue
