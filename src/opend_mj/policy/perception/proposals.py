@@ -108,7 +108,7 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
                 held = centres_overlap(np.array([group[0]], float), np.array([b for b, _ in out], float))[0]
                 if any(_area(out[i][0]) >= _area(group[0]) for i in np.nonzero(held)[0]):
                     continue
-                out = [p for p, h in zip(out, held) if not h]
+                out = [p for p, overlaps in zip(out, held) if not overlaps]
             out.append(group)
     return out
 
