@@ -341,7 +341,8 @@ def test_training_demos_of_one_kind(demos_file):
 def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small_dataset, tmp_path):
     """`opend train-policy --dagger 1`: round 0 trains on the demos; round 1 rolls that policy out,
     the planner as expert labels every state it reaches (the rollouts are training data whether or
-    not they opened their part), trains again, and validates each round on cabinets kept apart. A
+    not they opened their part), trains again (``--warm-start``: from round 0's weights), and
+    validates each round on cabinets kept apart. A
     second run finds every round done and runs no episode again."""
     from opend_mj.apps.dagger import split_cabinets
     from opend_mj.apps.demos import read_demos
@@ -351,7 +352,8 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     folder = tmp_path / "dagger"
     args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "20",
             "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
-            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--final-steps", "30", "--no-progress"]
+            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--final-steps", "30", "--warm-start",
+            "--no-progress"]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     summary = json.loads((tmp_path / "bc.json").read_text())["dagger"]
@@ -360,6 +362,8 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
     steps = [json.loads((folder / f"policy_{i}.json").read_text())["config"]["steps"] for i in (0, 1)]
     assert steps == [20, 30]  # the last round, whose policy is shipped, trains for --final-steps
+    inits = [json.loads((folder / f"policy_{i}.json").read_text())["init"] for i in (0, 1)]
+    assert inits == [None, str(folder / "policy_0.pt")]  # --warm-start: round 1 starts from round 0's policy
     chosen = summary["rounds"][summary["chosen"]]  # the shipped policy: the best on validation
     assert chosen["val_success"] == max(r["val_success"] for r in summary["rounds"])
     assert (tmp_path / "bc.pt").read_bytes() == Path(chosen["checkpoint"]).read_bytes()
@@ -413,3 +417,41 @@ def test_grasp_style_token_trains_and_acts(demos_file, small_dataset, tmp_path):
                                     f"checkpoint={ckpt}"])
     assert run.exit_code == 0, run.output
     assert "error" not in results.read_text()
+
+
+def test_a_warm_start_trains_on_from_a_checkpoint_and_refuses_one_that_does_not_fit(demos_file, tmp_path):
+    """`opend train-policy --init CKPT` starts from the checkpoint's weights and standardisation, with
+    its architecture (a 16-wide model stays 16 wide whatever --d-model says): at a learning rate of
+    zero the weights are the checkpoint's. A checkpoint of another hand, or a file that is none, is
+    refused in one line naming it."""
+    import torch
+
+    out, _ = demos_file
+    base = tmp_path / "base.pt"
+    common = ["--demos", str(out), "--hand", "franka", "--batch-size", "16", "--no-progress"]
+    result = CliRunner().invoke(main, ["train-policy", *common, "--out", str(base), "--steps", "20", "--d-model", "16"])
+    assert result.exit_code == 0, result.output
+    warm = tmp_path / "warm.pt"
+    result = CliRunner().invoke(main, ["train-policy", *common, "--out", str(warm), "--steps", "5", "--lr", "0",
+                                       "--init", str(base)])
+    assert result.exit_code == 0, result.output
+    a, b = torch.load(base, weights_only=False), torch.load(warm, weights_only=False)
+    assert b["config"]["d_model"] == 16 and b["summary"]["init"] == str(base)
+    for key, value in a["model"].items():
+        assert torch.equal(value, b["model"][key]), key
+    trained = tmp_path / "trained.pt"
+    result = CliRunner().invoke(main, ["train-policy", *common, "--out", str(trained), "--steps", "5", "--init", str(base)])
+    assert result.exit_code == 0, result.output
+    moved = torch.load(trained, weights_only=False)["model"]
+    assert any(not torch.equal(a["model"][k], moved[k]) for k in a["model"] if not k.endswith(("_mean", "_std")))
+    assert all(torch.equal(a["model"][k], moved[k]) for k in a["model"] if k.endswith(("_mean", "_std")))
+
+    other = dict(a, hand="allegro")
+    torch.save(other, tmp_path / "allegro.pt")
+    refused = CliRunner().invoke(main, ["train-policy", *common, "--out", str(tmp_path / "x.pt"), "--steps", "1",
+                                        "--init", str(tmp_path / "allegro.pt")])
+    assert refused.exit_code != 0 and "allegro.pt" in refused.output and "allegro hand" in refused.output
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    junk = CliRunner().invoke(main, ["train-policy", *common, "--out", str(tmp_path / "y.pt"), "--steps", "1",
+                                     "--init", str(tmp_path / "junk.pt")])
+    assert junk.exit_code != 0 and "junk.pt" in junk.output and "Traceback" not in junk.output

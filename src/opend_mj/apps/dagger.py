@@ -57,7 +57,11 @@ class DaggerConfig:
     first K training targets only are rolled out; ``val_limit``: the first K validation targets only
     are run; ``final_steps``: optimiser steps of the final round's training (its policy is the
     one shipped where it validates best; it trains on all the data), where the rounds before it, whose policies only roll out,
-    train for the `BCConfig`'s ``steps`` (None: those steps too)."""
+    train for the `BCConfig`'s ``steps`` (None: those steps too); ``warm_start``: each round after
+    round 0 starts from the previous round's weights (`bc_train.train_bc`'s ``init``) instead of from
+    scratch, so that a round needs fewer optimiser steps (``round_steps``: those of the rounds
+    between round 0 and the final one; None: the `BCConfig`'s ``steps``); ``init``: round 0 starts from this
+    checkpoint (None: from scratch)."""
 
     rounds: int = 2
     beta0: float = 0.5
@@ -68,6 +72,9 @@ class DaggerConfig:
     limit: int | None = None  # roll out the first K training targets only (small runs, tests)
     val_limit: int | None = None  # validate on the first K validation targets only
     final_steps: int | None = None  # optimiser steps of the final round (None: the BCConfig's)
+    warm_start: bool = False  # rounds after round 0 start from the previous round's policy
+    round_steps: int | None = None  # optimiser steps of the rounds between round 0 and the final one (None: the BCConfig's)
+    init: Path | None = None  # round 0 starts from this checkpoint (None: from scratch)
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -205,7 +212,8 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     val_jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.val_seed,
                          cabinet_ids=sorted(val_cabs))[:config.val_limit]
     demos = [d for d in load_training_demos(list(demo_files), hand=hand) if d.attrs.get("cabinet") not in val_cabs]
-    summary = {"hand": hand, "demo_files": [str(p) for p in demo_files], "config": config.__dict__,
+    summary = {"hand": hand, "demo_files": [str(p) for p in demo_files],
+               "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in config.__dict__.items()},
                "validation": {"cabinets": len(val_cabs), "targets": len(val_jobs), "seed": config.val_seed},
                "rounds": []}
     data_files: list[Path] = []
@@ -223,9 +231,14 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
         if not ckpt.is_file():
             log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts")
-            steps = config.final_steps if round_ == config.rounds and config.final_steps else bc_config.steps
+            steps = bc_config.steps
+            if round_ == config.rounds and config.final_steps:
+                steps = config.final_steps
+            elif round_ > 0 and config.round_steps:
+                steps = config.round_steps
+            init = (folder / f"policy_{round_ - 1}.pt") if round_ > 0 and config.warm_start else config.init
             trained = train_bc(demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=ckpt,
-                               progress=progress, threads=threads)
+                               progress=progress, threads=threads, init=init)
         else:
             trained = json.loads(ckpt.with_suffix(".json").read_text())
         val_out = folder / f"val_{round_}.jsonl"

@@ -85,6 +85,10 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               help="Train on the demos of this kind of target only (a member that a bundle routes that kind "
                    "to: `opend bundle-policy --route`) [both].")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--init", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Start from this checkpoint's weights (a warm start; its architecture wins) instead of from scratch.")
+@click.option("--warm-start/--no-warm-start", default=False, show_default=True,
+              help="DAgger: each round after round 0 starts from the previous round's policy instead of from scratch.")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
 @click.option("--device", default="cpu", show_default=True)
 @click.option("--dagger", "dagger_rounds", type=click.IntRange(min=0), default=None,
@@ -102,14 +106,16 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               help="DAgger: roll out the first K training targets only [all].")
 @click.option("--final-steps", type=click.IntRange(min=1), default=None,
               help="DAgger: optimiser steps of the final round, trained on all the data [--steps].")
+@click.option("--round-steps", type=click.IntRange(min=1), default=None,
+              help="DAgger: optimiser steps of the rounds between round 0 and the final one [--steps].")
 @click.option("--val-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: validate on the first K validation targets only [all].")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
-def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, threads,
-                 device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, final_steps, val_targets,
-                 workers, progress):
+def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, init,
+                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, final_steps, round_steps,
+                 val_targets, workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
 
@@ -129,13 +135,14 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
         from opend_mj.apps.dagger import DaggerConfig
 
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
-                              limit=dagger_targets, val_limit=val_targets, final_steps=final_steps)
+                              limit=dagger_targets, val_limit=val_targets, final_steps=final_steps,
+                              warm_start=warm_start, init=init, round_steps=round_steps)
         _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, workers, threads, progress)
         return
     try:
         demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind, hand=hand)
         summary = train_bc(demos_list, hand, config, out=out, progress=progress, threads=threads, device=device,
-                           kind=kind)
+                           kind=kind, init=init)
     except (ValueError, FileNotFoundError) as exc:
         raise click.ClickException(str(exc)) from exc
     last = summary["history"][-1] if summary["history"] else {}

@@ -113,9 +113,12 @@ def split_demos(data: DemoArrays, val_fraction: float, seed: int) -> tuple[np.nd
 
 def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None = None, val_fraction: float = 0.1,
              progress: bool = True, threads: int | None = None, device: str = "cpu", log=None,
-             kind: str | None = None) -> dict:
+             kind: str | None = None, init: Path | None = None) -> dict:
     """Train on ``demos`` (of ``hand``); write the checkpoint to ``out`` (with a ``.json`` summary beside it).
     ``kind`` ("drawer", "door") is recorded in the summary where the demos were of one kind only.
+    ``init``: a checkpoint to start from (a warm start: its weights and its standardisation of
+    inputs and actions, which its weights were trained for); its architecture (width, layers,
+    chunk, lags, grasp-style token) wins over ``config``'s, whose optimiser settings and steps apply.
 
     Returns the summary: data sizes, losses, seconds, parameter count."""
     import torch
@@ -133,13 +136,20 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     if config.modes and data.modes is None:
         raise ValueError("the grasp-style token needs demonstrations that recorded their grasp styles "
                          "(grasp_style): record them again with this opend-mj's `opend demos`")
+    if init is not None:
+        config = _warm_config(Path(init), config, hand, data)
     train_ids, val_ids = split_demos(data, val_fraction, config.seed)
     model = build_model(data.ctx.shape[1], data.steps.shape[1], data.actions.shape[1], config).to(device)
     train_rows = np.concatenate([np.arange(data.start[i], data.start[i] + data.length[i]) for i in train_ids])
-    for name, arr in (("ctx", data.ctx[train_ids]), ("step", data.steps[train_rows]), ("act", data.actions[train_rows])):
-        mean, std = _stats(arr)
-        getattr(model, f"{name}_mean").copy_(torch.from_numpy(mean))
-        getattr(model, f"{name}_std").copy_(torch.from_numpy(std))
+    if init is not None:  # (read and checked by _warm_config)
+        start = torch.load(Path(init), map_location="cpu", weights_only=False)["model"]
+        model.load_state_dict({k: v.float() for k, v in start.items()})
+    else:
+        for name, arr in (("ctx", data.ctx[train_ids]), ("step", data.steps[train_rows]),
+                          ("act", data.actions[train_rows])):
+            mean, std = _stats(arr)
+            getattr(model, f"{name}_mean").copy_(torch.from_numpy(mean))
+            getattr(model, f"{name}_std").copy_(torch.from_numpy(std))
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     warmup = max(1, config.steps // 20)
     sched = torch.optim.lr_scheduler.LambdaLR(
@@ -207,10 +217,41 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
         "val_demos": int(len(val_ids)), "samples": int(len(data.steps)), "cabinets": len(set(data.cabinets)),
         "max_time": round(data.max_time, 3), "stop_time": round(data.stop_time, 3), "parameters": int(sum(p.numel() for p in model.parameters())),
         "seconds": round(seconds, 1), "threads": torch.get_num_threads(), "history": history,
+        "init": None if init is None else str(init),
     }
     if out is not None:
         save_checkpoint(model, summary, data, adapter, Path(out))
     return summary
+
+
+#: BCConfig fields that shape the model: a warm start takes them from the checkpoint it starts from.
+ARCHITECTURE_FIELDS = ("chunk", "lags", "d_model", "heads", "enc_layers", "dec_layers", "dropout", "modes")
+
+
+def _warm_config(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> BCConfig:
+    """``config`` with the architecture of the checkpoint ``init`` (:data:`ARCHITECTURE_FIELDS`);
+    a checkpoint of another hand or other input sizes is refused with one line naming it."""
+    import dataclasses
+
+    import torch
+
+    if not init.is_file():
+        raise FileNotFoundError(f"{init}: no checkpoint to start from (--init)")
+    try:
+        ckpt = torch.load(init, map_location="cpu", weights_only=False)
+    except Exception as exc:  # a damaged or foreign file: pickle, zip and torch errors alike
+        raise ValueError(f"{init}: not a checkpoint of `opend train-policy` (--init): {type(exc).__name__}") from None
+    if not isinstance(ckpt, dict) or "model" not in ckpt or "dims" not in ckpt:
+        raise ValueError(f"{init}: not a checkpoint of `opend train-policy` (--init)")
+    if ckpt.get("hand") not in (None, hand):
+        raise ValueError(f"{init}: a checkpoint of the {ckpt['hand']} hand, but training is for the {hand} hand (--init)")
+    dims = {"ctx": data.ctx.shape[1], "step": data.steps.shape[1], "act": data.actions.shape[1]}
+    if {k: int(v) for k, v in ckpt["dims"].items()} != dims:
+        raise ValueError(f"{init}: its inputs and actions are {ckpt['dims']}, these demonstrations give {dims} (--init)")
+    theirs = BCConfig.from_dict(ckpt["config"])
+    if theirs.modes and data.modes is None:
+        raise ValueError(f"{init}: has the grasp-style token, and these demonstrations recorded no grasp styles")
+    return dataclasses.replace(config, **{f: getattr(theirs, f) for f in ARCHITECTURE_FIELDS})
 
 
 def save_checkpoint(model, summary: dict, data: DemoArrays, adapter, out: Path) -> None:
