@@ -341,8 +341,8 @@ def test_training_demos_of_one_kind(demos_file):
 def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small_dataset, tmp_path):
     """`opend train-policy --dagger 1`: round 0 trains on the demos; round 1 rolls that policy out,
     the planner as expert labels every state it reaches (the rollouts are training data whether or
-    not they opened their part), trains again (``--warm-start``: from round 0's weights), and
-    validates each round on cabinets kept apart. A
+    not they opened their part), trains again (from scratch: it is the final round, even with
+    ``--warm-start``), and validates each round on cabinets kept apart. A
     second run finds every round done and runs no episode again."""
     from opend_mj.apps.dagger import split_cabinets
     from opend_mj.apps.demos import read_demos
@@ -363,7 +363,7 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     steps = [json.loads((folder / f"policy_{i}.json").read_text())["config"]["steps"] for i in (0, 1)]
     assert steps == [20, 30]  # the last round, whose policy is shipped, trains for --final-steps
     inits = [json.loads((folder / f"policy_{i}.json").read_text())["init"] for i in (0, 1)]
-    assert inits == [None, str(folder / "policy_0.pt")]  # --warm-start: round 1 starts from round 0's policy
+    assert inits == [None, None]  # the final round trains from scratch on all the data, --warm-start or not
     chosen = summary["rounds"][summary["chosen"]]  # the shipped policy: the best on validation
     assert chosen["val_success"] == max(r["val_success"] for r in summary["rounds"])
     assert (tmp_path / "bc.pt").read_bytes() == Path(chosen["checkpoint"]).read_bytes()
@@ -376,6 +376,17 @@ def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output
     assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log
+
+
+def test_warm_started_rounds_start_from_the_previous_policy_and_the_final_round_from_scratch(tmp_path):
+    from opend_mj.apps.dagger import DaggerConfig
+
+    warm = DaggerConfig(rounds=3, warm_start=True, round_steps=500, final_steps=9000, init=tmp_path / "start.pt")
+    plans = [warm.round_training(r, 3000, tmp_path) for r in range(4)]
+    assert plans == [(3000, tmp_path / "start.pt"), (500, tmp_path / "policy_0.pt"), (500, tmp_path / "policy_1.pt"),
+                     (9000, None)]
+    cold = DaggerConfig(rounds=2)
+    assert [cold.round_training(r, 3000, tmp_path) for r in range(3)] == [(3000, None)] * 3
 
 
 def test_best_round_is_the_best_on_validation_and_the_later_on_a_tie():

@@ -57,11 +57,11 @@ class DaggerConfig:
     first K training targets only are rolled out; ``val_limit``: the first K validation targets only
     are run; ``final_steps``: optimiser steps of the final round's training (its policy is the
     one shipped where it validates best; it trains on all the data), where the rounds before it, whose policies only roll out,
-    train for the `BCConfig`'s ``steps`` (None: those steps too); ``warm_start``: each round after
-    round 0 starts from the previous round's weights (`bc_train.train_bc`'s ``init``) instead of from
-    scratch, so that a round needs fewer optimiser steps (``round_steps``: those of the rounds
-    between round 0 and the final one; None: the `BCConfig`'s ``steps``); ``init``: round 0 starts from this
-    checkpoint (None: from scratch)."""
+    train for the `BCConfig`'s ``steps`` (None: those steps too); ``warm_start``: each round between
+    round 0 and the final one starts from the previous round's weights (`bc_train.train_bc`'s
+    ``init``) instead of from scratch, so that it needs fewer optimiser steps (``round_steps``; None:
+    the `BCConfig`'s ``steps``); ``init``: round 0 starts from this checkpoint (None: from scratch).
+    See :meth:`round_training`."""
 
     rounds: int = 2
     beta0: float = 0.5
@@ -73,11 +73,23 @@ class DaggerConfig:
     val_limit: int | None = None  # validate on the first K validation targets only
     final_steps: int | None = None  # optimiser steps of the final round (None: the BCConfig's)
     warm_start: bool = False  # rounds after round 0 start from the previous round's policy
-    round_steps: int | None = None  # optimiser steps of the rounds between round 0 and the final one (None: the BCConfig's)
+    round_steps: int | None = None  # optimiser steps of the rounds between round 0 and the final one
     init: Path | None = None  # round 0 starts from this checkpoint (None: from scratch)
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
+
+    def round_training(self, round_: int, steps: int, folder: Path) -> tuple[int, Path | None]:
+        """(optimiser steps, checkpoint to start from or None) of round ``round_``'s training, where
+        ``steps`` is the `BCConfig`'s: round 0 from ``init``; a round between it and the final one
+        for ``round_steps``, from the previous round's policy where ``warm_start``; the final round
+        from scratch on all the data for ``final_steps`` (its policy is the one shipped)."""
+        if round_ == 0:
+            return steps, self.init
+        if round_ == self.rounds:
+            return self.final_steps or steps, None
+        previous = Path(folder) / f"policy_{round_ - 1}.pt" if self.warm_start else None
+        return self.round_steps or steps, previous
 
 
 def rollout_episode(job, env, config) -> tuple[dict, object]:
@@ -231,12 +243,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
         if not ckpt.is_file():
             log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts")
-            steps = bc_config.steps
-            if round_ == config.rounds and config.final_steps:
-                steps = config.final_steps
-            elif round_ > 0 and config.round_steps:
-                steps = config.round_steps
-            init = (folder / f"policy_{round_ - 1}.pt") if round_ > 0 and config.warm_start else config.init
+            steps, init = config.round_training(round_, bc_config.steps, folder)
             trained = train_bc(demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=ckpt,
                                progress=progress, threads=threads, init=init)
         else:

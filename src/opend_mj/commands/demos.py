@@ -86,9 +86,11 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
                    "to: `opend bundle-policy --route`) [both].")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--init", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Start from this checkpoint's weights (a warm start; its architecture wins) instead of from scratch.")
+              help="Start from this checkpoint's weights (a warm start; its architecture wins) instead of "
+                   "from scratch.")
 @click.option("--warm-start/--no-warm-start", default=False, show_default=True,
-              help="DAgger: each round after round 0 starts from the previous round's policy instead of from scratch.")
+              help="DAgger: each round between round 0 and the final one starts from the previous round's "
+                   "policy instead of from scratch (the final round trains from scratch on all the data).")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
 @click.option("--device", default="cpu", show_default=True)
 @click.option("--dagger", "dagger_rounds", type=click.IntRange(min=0), default=None,
@@ -114,8 +116,8 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
 def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, init,
-                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets, final_steps, round_steps,
-                 val_targets, workers, progress):
+                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets,
+                 final_steps, round_steps, val_targets, workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
 

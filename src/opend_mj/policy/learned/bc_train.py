@@ -244,10 +244,12 @@ def _warm_config(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> B
     if not isinstance(ckpt, dict) or "model" not in ckpt or "dims" not in ckpt:
         raise ValueError(f"{init}: not a checkpoint of `opend train-policy` (--init)")
     if ckpt.get("hand") not in (None, hand):
-        raise ValueError(f"{init}: a checkpoint of the {ckpt['hand']} hand, but training is for the {hand} hand (--init)")
+        raise ValueError(f"{init}: a checkpoint of the {ckpt['hand']} hand, but training is for the {hand} hand "
+                         "(--init)")
     dims = {"ctx": data.ctx.shape[1], "step": data.steps.shape[1], "act": data.actions.shape[1]}
     if {k: int(v) for k, v in ckpt["dims"].items()} != dims:
-        raise ValueError(f"{init}: its inputs and actions are {ckpt['dims']}, these demonstrations give {dims} (--init)")
+        raise ValueError(f"{init}: its inputs and actions are {ckpt['dims']}, these demonstrations give {dims} "
+                         "(--init)")
     theirs = BCConfig.from_dict(ckpt["config"])
     if theirs.modes and data.modes is None:
         raise ValueError(f"{init}: has the grasp-style token, and these demonstrations recorded no grasp styles")
