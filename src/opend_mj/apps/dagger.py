@@ -72,7 +72,7 @@ class DaggerConfig:
     limit: int | None = None  # roll out the first K training targets only (small runs, tests)
     val_limit: int | None = None  # validate on the first K validation targets only
     final_steps: int | None = None  # optimiser steps of the final round (None: the BCConfig's)
-    warm_start: bool = False  # rounds after round 0 start from the previous round's policy
+    warm_start: bool = False  # rounds between round 0 and the final one start from the previous round's policy
     round_steps: int | None = None  # optimiser steps of the rounds between round 0 and the final one
     init: Path | None = None  # round 0 starts from this checkpoint (None: from scratch)
 

@@ -136,14 +136,14 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     if config.modes and data.modes is None:
         raise ValueError("the grasp-style token needs demonstrations that recorded their grasp styles "
                          "(grasp_style): record them again with this opend-mj's `opend demos`")
+    start = None
     if init is not None:
-        config = _warm_config(Path(init), config, hand, data)
+        config, start = _warm_start(Path(init), config, hand, data)
     train_ids, val_ids = split_demos(data, val_fraction, config.seed)
     model = build_model(data.ctx.shape[1], data.steps.shape[1], data.actions.shape[1], config).to(device)
     train_rows = np.concatenate([np.arange(data.start[i], data.start[i] + data.length[i]) for i in train_ids])
-    if init is not None:  # (read and checked by _warm_config)
-        start = torch.load(Path(init), map_location="cpu", weights_only=False)["model"]
-        model.load_state_dict({k: v.float() for k, v in start.items()})
+    if start is not None:
+        model.load_state_dict(start)
     else:
         for name, arr in (("ctx", data.ctx[train_ids]), ("step", data.steps[train_rows]),
                           ("act", data.actions[train_rows])):
@@ -228,9 +228,10 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
 ARCHITECTURE_FIELDS = ("chunk", "lags", "d_model", "heads", "enc_layers", "dec_layers", "dropout", "modes")
 
 
-def _warm_config(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> BCConfig:
-    """``config`` with the architecture of the checkpoint ``init`` (:data:`ARCHITECTURE_FIELDS`);
-    a checkpoint of another hand or other input sizes is refused with one line naming it."""
+def _warm_start(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> tuple[BCConfig, dict]:
+    """(``config`` with the architecture of the checkpoint ``init`` (:data:`ARCHITECTURE_FIELDS`), its
+    weights and standardisation as float32): the checkpoint read once; one of another hand or other
+    input sizes is refused with one line naming it."""
     import dataclasses
 
     import torch
@@ -253,7 +254,8 @@ def _warm_config(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> B
     theirs = BCConfig.from_dict(ckpt["config"])
     if theirs.modes and data.modes is None:
         raise ValueError(f"{init}: has the grasp-style token, and these demonstrations recorded no grasp styles")
-    return dataclasses.replace(config, **{f: getattr(theirs, f) for f in ARCHITECTURE_FIELDS})
+    weights = {k: v.float() for k, v in ckpt["model"].items()}
+    return dataclasses.replace(config, **{f: getattr(theirs, f) for f in ARCHITECTURE_FIELDS}), weights
 
 
 def save_checkpoint(model, summary: dict, data: DemoArrays, adapter, out: Path) -> None:
