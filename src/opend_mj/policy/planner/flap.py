@@ -137,16 +137,29 @@ class FlapSteering(Stage):
         fit = float(((u * u + w * w) * w).sum()) / den
         return float(np.clip(fit, share * flap.reach, flap.reach))
 
+    def centre(self, flap: Flap, state: PullState) -> np.ndarray:
+        """The centre (world, m) of the circle the pull follows: through the held path's start,
+        tangent to the front there (:meth:`radius`)."""
+        return flap.start + np.array([0.0, 0.0, flap.sign * self.radius(flap, state)])
+
     def _tangent(self, site, state: PullState) -> tuple[float, float]:
-        """The flap circle's opening tangent at the site: (along ``out``, up)."""
+        """The flap circle's opening tangent at the site: (along ``out``, up), about :meth:`centre`."""
         flap = state.flap
-        radius = self.radius(flap, state)
-        centre = flap.start + np.array([0.0, 0.0, flap.sign * radius])
-        d = site - centre
+        d = site - self.centre(flap, state)
         u = float(d[:2] @ flap.out[:2])
         w = float(d[2])
         norm = max(1e-6, math.hypot(u, w))
         return flap.sign * -w / norm, flap.sign * u / norm
+
+    def press_direction(self, site, state: PullState) -> np.ndarray:
+        """The world unit vector down the flap's front at the site (straight down while it is
+        closed, turned with it as it opens): the way fingers on its bar's top press."""
+        flap = state.flap
+        radial = site - self.centre(flap, state)  # from the hinge out to the site
+        norm = float(np.linalg.norm(radial))
+        if norm < 1e-6:
+            return np.array([0.0, 0.0, -1.0])
+        return flap.sign * radial / norm
 
     def tilt_at(self, site, state: PullState) -> float:
         """The flap's angle (deg, rising positive) where its handle is at ``site``."""

@@ -266,7 +266,10 @@ class Pulling(Stage):
             target = target - pull_dir * (ahead - cfg.pulling.lead)
         lateral = (target - site) - pull_dir * float((target - site) @ pull_dir)
         run.target = target - lateral
-        if g.press:  # a hook from above never rides up over the bar: at most ``press`` below the
+        if g.press and state.flap is not None:  # on a flap: pressed down its front, the bar's top
+            # turning with it (a press straight down would hold the flap back as it lifts)
+            run.target = run.target + g.press * self.flap.press_direction(site, state)
+        elif g.press:  # a hook from above never rides up over the bar: at most ``press`` below the
             # site (fingers resting on a solid bar's top drag it by friction), not below the planned height
             run.target = kept_down(robot, run.target, g.press, float(g.pos[2]))
         robot.step(run.target, run.quat, g.closed)
