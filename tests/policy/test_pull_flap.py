@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from opend_mj.policy.planner import GraspChoice, Observation, Planner, PlannerConfig, PlanResult, PullState
+from opend_mj.policy.planner.records import Flap
 from opend_mj.policy.solvers import get_solver
 from opend_mj.sim.hands import load_spec
 from opend_mj.transforms import axis_angle_quat, quat_axis_z
@@ -310,8 +311,6 @@ def test_fingers_on_a_flaps_bar_press_down_its_front_as_it_turns(sign):
     """Fingers resting on a flap's bar from above press along its front, the way its bar's top
     faces: straight down while it is closed, turned with it as it opens (a press straight down
     would hold a lifting flap back and stall it part way)."""
-    from opend_mj.policy.planner.records import Flap
-
     planner = Planner(get_solver("oracle", ground_truth=lambda: None), load_spec("franka"), PlannerConfig())
     start, reach = np.array([-0.3, 0.0, START_Z]), 0.4
     state = PullState(quat0=np.array([1.0, 0.0, 0.0, 0.0]))
