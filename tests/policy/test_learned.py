@@ -572,6 +572,39 @@ def test_a_handle_seen_to_be_a_door_is_not_the_named_drawer():
     assert np.allclose(select_handle(found, None, "top drawer", config=cfg, observed=seen)[0], boxes[0])
 
 
+def test_a_box_the_hand_found_empty_is_no_candidate():
+    """Three drawer bars; "bottom drawer" names the lowest. Once the hand closed on nothing there
+    (``NO_HANDLE``; noise made a ridge of a panel), the next lowest is the bottom drawer, and with
+    every candidate found empty there is no answer at all, not the empty box again."""
+    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.learned.detector import MatchConfig, select_handle
+
+    boxes = [_box(128, 40), _box(128, 80), _box(128, 170)]
+    found = _detections(boxes, [0.95] * 3, [[0.99, 0.01]] * 3)
+    cfg = MatchConfig(use_proposals=False)
+    empty = ((tuple(boxes[2]), NO_HANDLE),)
+    assert np.allclose(select_handle(found, None, "bottom drawer", config=cfg, observed=empty)[0], boxes[1])
+    assert np.allclose(select_handle(found, None, "top drawer", config=cfg, observed=empty)[0], boxes[0])
+    every = tuple((tuple(b), NO_HANDLE) for b in boxes)
+    assert select_handle(found, None, "bottom drawer", config=cfg, observed=every) is None
+
+
+def test_the_map_gives_up_a_box_found_empty(front_view, cabinet_depth):
+    """CLIPort's map favours the top-left bar for "door"; once the hand found nothing there, the
+    other bar is the door."""
+    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.learned.affordance import choose_proposal
+    from opend_mj.policy.perception import handle_proposals
+
+    proposals = handle_proposals(cabinet_depth, front_view)
+    prob = np.zeros((256, 256), np.float32)
+    prob[60:80, 60:110] = 0.9
+    prob[150:190, 175:190] = 0.2
+    first = choose_proposal(prob, proposals, "door", cabinet_depth, front_view)
+    second = choose_proposal(prob, proposals, "door", cabinet_depth, front_view, observed=((first, NO_HANDLE),))
+    assert first[0] < 128 and second[0] > 128 and second[1] > 128
+
+
 def test_the_map_gives_up_a_handle_seen_to_be_of_the_other_kind(front_view, cabinet_depth):
     """CLIPort's map favours the top-left bar for "door"; once that bar has been seen to slide out
     like a drawer's, the other bar is the door."""

@@ -441,6 +441,49 @@ class _WrongKindFirst:
         return HandleBox(*box)
 
 
+class _EmptyBoxFirst:
+    """A learned-like solver whose first answer is a box on a bare panel (``boxes["empty"]``, as
+    noisy depth proposes a ridge that is none), and the named handle (``boxes["named"]``) once told
+    that the hand found nothing there."""
+
+    name = "empty_box_first"
+    needs_ground_truth = False
+    accepts_observed = True
+    boxes: dict = {}
+    calls: list = []
+
+    def solve(self, rgb, depth, instruction, camera_view, observed=()):
+        from opend_mj.policy.handle import HandleBox
+
+        type(self).calls.append(tuple(observed))
+        return HandleBox(*(self.boxes["empty"] if not observed else self.boxes["named"]))
+
+
+@pytest.mark.slow
+def test_a_box_where_the_fingers_close_on_nothing_is_given_up_for_another(planner_cabinets):
+    """The solver first names a bare stretch of the top drawer's front, 15 px below its bar: the
+    Franka gripper closes on air at every grasp it tries there, gives the box back to the solver as
+    empty (grown by ``KindConfig.empty_margin``), and opens the drawer at the box it gets next."""
+    import dataclasses
+
+    from opend_mj.evaluation.runner import run_episode
+    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.solvers import register_solver
+
+    job = _job(planner_cabinets, DRAWER, "franka")
+    gt = run_episode(job)["gt_box"]
+    empty = [gt[0], gt[1] + 15.0, gt[2], gt[3] + 15.0]
+    _EmptyBoxFirst.boxes, _EmptyBoxFirst.calls = {"empty": empty, "named": gt}, []
+    register_solver("empty_box_first", _EmptyBoxFirst, overwrite=True)
+    rec = run_episode(dataclasses.replace(job, solver="empty_box_first"))
+    assert "error" not in rec, rec.get("error")
+    assert rec["no_handle"] == [empty], rec.get("no_handle")
+    assert not any(v["held"] for v in rec["verify"][:-1]) and rec["verify"][-1]["held"], rec["verify"]
+    (box, kind), = _EmptyBoxFirst.calls[1]
+    assert kind == NO_HANDLE and box[0] < empty[0] and box[3] > empty[3]
+    assert rec["success"] and rec["open_ratio"] > 0.2 and rec["others_moved"] == [], rec
+
+
 @pytest.mark.slow
 def test_a_handle_of_the_other_kind_than_named_is_put_back_and_the_named_one_opened(tmp_path):
     """A cabinet holds a drawer (joint_0) and a double door (joint_1, joint_2). The solver first names

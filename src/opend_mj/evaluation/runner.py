@@ -295,6 +295,8 @@ def _run_episode_with_camera(job: EpisodeJob, env, cam) -> dict:
         "max_penetration_mm": round(penetration.deepest * 1000, 2),
         "physics_warnings": list(warnings),
         "video": str(video.path) if video else None,
+        # boxes given up because the hand closed on nothing there (absent where none was)
+        **({"no_handle": list(plan.no_handle)} if plan.no_handle else {}),
     }
 
 

@@ -60,13 +60,20 @@ def centres_overlap(a, b) -> np.ndarray:
     return inside(a, cb) | inside(b, ca).T
 
 
+#: The kind of an observed box (``observed`` of :meth:`HandleSolver.solve`) where the hand felt
+#: nothing: every grasp tried there closed on air, so no handle is there whatever the image said
+#: (noisy depth proposes ridges that are none).
+NO_HANDLE = "none"
+
+
 class HandleSolver(Protocol):
     """What the planner needs from a handle solver.
 
     A solver may also take ``observed=((box, kind), ...)`` in :meth:`solve` (and say so with a class
     attribute ``accepts_observed = True``): handles the robot has pulled and seen the kind of by
-    their motion ("drawer": slid out, "door": swung). The planner asks such a solver again after a
-    handle of the other kind than the instruction's."""
+    their motion ("drawer": slid out, "door": swung), or ``NO_HANDLE`` where the fingers closed on
+    nothing there at all. The planner asks such a solver again after a handle of the other kind than
+    the instruction's, and after a box with no handle in it."""
 
     name: str
 

@@ -198,8 +198,9 @@ def choose_proposal(prob: np.ndarray, proposals: list, instruction: str, depth: 
                     stack_drawers: bool = True, observed: tuple = ()) -> tuple | None:
     """The box of the proposal the affordance map and the instruction name (see the module doc), or
     None without proposals. ``proposals``: [(box (u0, v0, u1, v1), mask over the box), ...].
-    ``observed``: (box, kind) pairs of handles the robot moved and saw the kind of; those of the
-    other kind than the instruction's are not candidates (nor part of the named kind's layout)."""
+    ``observed``: (box, kind) pairs of handles the robot moved and saw the kind of, or of boxes it
+    found empty (``NO_HANDLE``); those of the other kind than the instruction's, and the empty ones,
+    are not candidates (nor part of the named kind's layout)."""
     from scipy.ndimage import gaussian_filter
 
     from opend_mj.language import describe_instruction

@@ -115,6 +115,7 @@ class Approach(Stage):
                     break
         if not held:
             held = sum(recent) >= 1
+        self.episode.felt |= held or any(v >= cfg.touch_min for v in touch.values())
         result.events.append({"verify": {"attempt": g.attempt, "held": held,
                                          "touch": {k: round(v, 1) for k, v in touch.items() if v > 0.1}}})
         return held

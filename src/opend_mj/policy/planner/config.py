@@ -321,6 +321,10 @@ class KindConfig:
     #: handles tried per episode (the first included), and the time (s) a new handle needs
     max_target_tries: int = 3
     retarget_time: float = 6.0
+    #: a box where every grasp closed on nothing is given back to the solver grown by this many
+    #: pixels on every side: the grasps tried there (and the depth snap of the box) cover about
+    #: that much around it, so a proposal a pixel or two off it is the same empty place
+    empty_margin: float = 3.0
 
 
 @dataclass(frozen=True)

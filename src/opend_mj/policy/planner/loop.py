@@ -11,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.language import InstructionNotUnderstood, target_kind
-from opend_mj.policy.handle import HandleSolver, centres_overlap
+from opend_mj.policy.handle import NO_HANDLE, HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     estimate_handle,
     measure_handle,
@@ -176,6 +176,19 @@ class Planner(Stage):
         while True:
             status, state, grasp = self.open_handle(robot, obs, handle, box, result, motion)
             motion = None  # a handle asked for again is approached as at an episode's start
+            if status == "no_handle":  # the fingers closed on nothing there: ask for another box
+                m = cfg.kind.empty_margin
+                u0, v0, u1, v1 = box.as_tuple()
+                observed = observed + (((u0 - m, v0 - m, u1 + m, v1 + m), NO_HANDLE),)
+                status = "not_held"
+                if not self._retarget(robot, observed):
+                    break
+                result.no_handle.append([round(x, 2) for x in box.as_tuple()])
+                new_handle, new_box = self.locate(robot, obs, result, observed)
+                if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
+                    break
+                handle, box = new_handle, new_box
+                continue
             if status != "wrong_kind":
                 break
             # the handle moved as the other kind: push it back, let go, ask the solver again
@@ -184,7 +197,7 @@ class Planner(Stage):
             result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
                                       "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
             self.kind.push_back(robot, grasp, state)
-            if len(observed) >= cfg.kind.max_target_tries or self._time_left(robot) < cfg.kind.retarget_time:
+            if not self._retarget(robot, observed):
                 status = "not_held"
                 break
             new_handle, new_box = self.locate(robot, obs, result, observed)
@@ -198,6 +211,13 @@ class Planner(Stage):
         result.grasp_style = grasp.style
         self._finish(robot, status, grasp, result)
         return result
+
+    def _retarget(self, robot, observed: tuple) -> bool:
+        """Whether another handle may be asked for after the ``observed`` ones were given up: fewer
+        than ``max_target_tries`` tried, ``retarget_time`` left, and a solver that takes them."""
+        cfg = self.config.kind
+        return (len(observed) < cfg.max_target_tries and self._time_left(robot) >= cfg.retarget_time
+                and getattr(self.solver, "accepts_observed", False))
 
     def _finish(self, robot, status: str, grasp, result: PlanResult) -> None:
         """Hold (closed where the pull finished, else open; released where ``release``) until
@@ -229,10 +249,12 @@ class Planner(Stage):
 
     def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult, motion: PartMotion | None = None):
         """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
-        pull state, last grasp); status "done", "slipped", "not_held" or "wrong_kind" (its motion
+        pull state, last grasp); status "done", "slipped", "not_held", "no_handle" (every grasp closed
+        on air, nothing moved: no handle there) or "wrong_kind" (its motion
         showed the other kind than the instruction's). ``motion``: see :meth:`run`."""
         cfg = self.config
         self.state.handle = handle
+        self.state.felt = False
         shape = self.perceive(handle, box, obs, result)
         grasp = self.grasping.choose_grasp(handle, shape, obs, result)
         door = result.target_kind == "door" and cfg.pull == "arc"
@@ -285,6 +307,9 @@ class Planner(Stage):
             grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
         if door and status != "done" and cfg.recovery.push_recovery:
             self.recovery.recover_door(robot, state, result)
+        if status == "not_held" and not self.state.felt and not held and not result.pushed \
+                and state.travelled < GRASP_FAILED_TRAVEL:
+            return "no_handle", state, grasp  # every grasp closed on air: no handle in this box
         return status, state, grasp
 
     def _taken_over(self, robot, grasp: GraspChoice, motion: PartMotion, state: PullState, result: PlanResult):

@@ -43,6 +43,9 @@ class PlanResult:
     #: handles given up because their motion showed the other kind than the instruction's:
     #: [{"box": [...], "kind": "door" | "drawer", "by": "path" | "front", "turn_deg": ...}, ...]
     wrong_kind: list = field(default_factory=list)
+    #: boxes given up because every grasp tried there closed on nothing (no touch at all):
+    #: [[u0, v0, u1, v1], ...]
+    no_handle: list = field(default_factory=list)
     events: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
@@ -145,7 +148,7 @@ class EpisodeState:
     taken after a wrong handle was pushed back); ``handle``: the 3D handle being opened;
     ``hinge``: the door's hinge line (world x, y) seen in depth, or None; ``first_pos``: the first
     grasp's site position (re-grasps with nothing held go near it); ``approach_target``: where the
-    latest approach took the grasp site (the fingers close there); ``taken_over``: see below."""
+    latest approach took the grasp site (the fingers close there); ``taken_over``, ``felt``: see below."""
 
     first: Observation | None = None
     handle: object | None = None  # HandleEstimate
@@ -155,6 +158,9 @@ class EpisodeState:
     #: an episode taken over mid-way: {"turned_deg", "slid", "held"} (how far the part had moved,
     #: whether the hand held the handle); None for an episode planned from its start
     taken_over: dict | None = None
+    #: whether the fingers have felt anything (touch at or above ``VerifyConfig.touch_min``) in a
+    #: grasp's check at the handle being opened: a box where they never did holds no handle
+    felt: bool = False
 
 
 @dataclass

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj.language import describe_instruction
-from opend_mj.policy.handle import centres_overlap
+from opend_mj.policy.handle import NO_HANDLE, centres_overlap
 from opend_mj.policy.learned.detector.matching import box_orientation, consistent_choice, match_instruction
 from opend_mj.policy.learned.detector.model import KIND_LABELS, Detections, detect_handles, load_detector
 
@@ -110,7 +110,8 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
     head calls handles; with a kinds detector, those of the instructed kind (all of them where none
     is); Algorithm 1 (:func:`match_instruction`) picks among them. ``observed``: (box, kind) pairs
     of handles whose kind the robot saw by moving them (:func:`apply_observed_kinds`); their calls
-    are certain."""
+    are certain; candidates an observed box of kind ``NO_HANDLE`` covers (the hand closed on nothing
+    there) are dropped."""
     keep = found.handle >= config.threshold
     boxes, handle, kind = found.boxes[keep], found.handle[keep], found.kind[keep]
     if config.depth_verified and proposals is not None and len(proposals.boxes):
@@ -131,6 +132,12 @@ def select_handle(found: Detections, proposals: Detections | None, instruction: 
         boxes = np.concatenate([boxes, proposals.boxes[add]])
         handle = np.concatenate([handle, proposals.handle[add]])
         kind = np.concatenate([kind, proposals.kind[add]])
+    if observed and len(boxes):  # boxes the hand found empty are no candidates
+        empty = [i for i, k in observed_members(boxes, observed) if k == NO_HANDLE]
+        if empty:
+            keep = np.ones(len(boxes), bool)
+            keep[empty] = False
+            boxes, handle, kind = boxes[keep], handle[keep], kind[keep]
     if not len(boxes):
         return None
     kind = vertical_bar_prior(boxes, kind, config.vertical_door_odds, config.vertical_aspect)
@@ -185,8 +192,9 @@ class FasterRCNNSolver:
     accepts_observed = True
 
     def solve(self, rgb, depth, instruction, camera_view, observed: tuple = ()):
-        """The named handle's box; ``observed``: ((u0, v0, u1, v1), "drawer" | "door") pairs of
-        handles the robot moved and saw the kind of (a retry after a wrong handle)."""
+        """The named handle's box; ``observed``: ((u0, v0, u1, v1), "drawer" | "door" | NO_HANDLE)
+        pairs of handles the robot moved and saw the kind of, or of boxes it found empty (a retry
+        after a wrong handle or an empty box)."""
         from opend_mj.language import canonical_instruction
         from opend_mj.policy.handle import HandleBox
 
