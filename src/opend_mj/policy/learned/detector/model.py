@@ -40,6 +40,11 @@ class DetectorConfig:
     #: relief 0), for a detector trained on a sensor's depth (`opend train --depth-noise`); False, as
     #: surfaces 10 m away, as the detectors trained on exact renders read them.
     relief_holes: bool = False
+    #: Noisy depth's relief soft-thresholded at its own noise (:func:`depth_relief` ``denoise``):
+    #: exact depth is unchanged, so a checkpoint trained on exact renders reads noisy images as it
+    #: read its training ones, panels flat. (``checkpoints/fasterrcnn_sensor.pt`` learnt the raw
+    #: noisy relief and reads it raw: :func:`load_detector`.)
+    relief_denoise: bool = True
 
     @property
     def num_classes(self) -> int:
@@ -54,27 +59,54 @@ class DetectorConfig:
 #: relief that maps to 1 (metres; handles stand 1.2-9 cm proud of their panel).
 RELIEF_WINDOW = 25
 RELIEF_SCALE = 0.05
+#: Noisy depth (a real sensor's): relief within this many sigmas of the image's own depth noise
+#: (:func:`relief_noise`) is shrunk to 0, the rest by as much (a soft threshold), so that a flat
+#: panel reads flat, as on the exact renders the detector learnt from, while a handle, centimetres
+#: proud, keeps most of its relief. Exact depth reads no noise and is unchanged.
+RELIEF_NOISE_SIGMAS = 2.0
+#: Where the noise is read: rows from, to; columns from, to (fractions of the image: the camera
+#: frames the cabinet's front there), and the noise (m) below which depth counts as exact.
+RELIEF_NOISE_WINDOW = (0.3, 0.7, 0.35, 0.65)
+RELIEF_NOISE_FLOOR = 0.001
 
 
-def depth_relief(depth: np.ndarray, holes: bool = True) -> np.ndarray:
+def relief_noise(depth: np.ndarray) -> float:
+    """The depth noise (m, one sigma) of ``depth`` over ``RELIEF_NOISE_WINDOW``
+    (:func:`opend_mj.policy.perception.noise.pixel_noise`; 0 for exact depth)."""
+    from opend_mj.policy.perception.noise import pixel_noise
+
+    d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
+    h, w = d.shape
+    r0, r1, c0, c1 = RELIEF_NOISE_WINDOW
+    window = d[int(h * r0):int(h * r1), int(w * c0):int(w * c1)]
+    return pixel_noise(window, window > 0.05, RELIEF_NOISE_FLOOR)
+
+
+def depth_relief(depth: np.ndarray, holes: bool = True, denoise: bool = True) -> np.ndarray:
     """(H, W) float32 in [-1, 1]: the local mean depth (``RELIEF_WINDOW`` px) minus the depth, over
     ``RELIEF_SCALE``; positive where a pixel stands nearer than its surroundings (a handle).
 
     Pixels without a reading (0 or not finite, as a real sensor reports holes at edges and on dark
     surfaces): with ``holes``, left out of the local mean, with relief 0 (a hole is not a surface
     10 m away, which would mark everything around it as standing proud); without, read as 10 m
-    away (`DetectorConfig.relief_holes`). An image without holes gives the same relief either way."""
+    away (`DetectorConfig.relief_holes`). An image without holes gives the same relief either way.
+    ``denoise``: noisy depth's relief soft-thresholded at ``RELIEF_NOISE_SIGMAS`` sigmas of its noise."""
     from scipy.ndimage import uniform_filter
 
     d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
     read = d > 0.05
     if not holes or read.all():
         d = np.where(read, d, 10.0).astype(np.float32)
-        return np.clip((uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE, -1.0, 1.0)
-    w = uniform_filter(read.astype(np.float32), RELIEF_WINDOW, mode="nearest")
-    total = uniform_filter(np.where(read, d, 0.0).astype(np.float32), RELIEF_WINDOW, mode="nearest")
-    mean = total / np.maximum(w, 1e-6)  # over the pixels with a reading
-    relief = np.where(read & (w > 0), (mean - d) / RELIEF_SCALE, 0.0)
+        relief = (uniform_filter(d, RELIEF_WINDOW, mode="nearest") - d) / RELIEF_SCALE
+    else:
+        w = uniform_filter(read.astype(np.float32), RELIEF_WINDOW, mode="nearest")
+        total = uniform_filter(np.where(read, d, 0.0).astype(np.float32), RELIEF_WINDOW, mode="nearest")
+        mean = total / np.maximum(w, 1e-6)  # over the pixels with a reading
+        relief = np.where(read & (w > 0), (mean - d) / RELIEF_SCALE, 0.0)
+    noise = relief_noise(depth) if denoise else 0.0
+    if noise > 0:
+        t = RELIEF_NOISE_SIGMAS * noise / RELIEF_SCALE
+        relief = np.sign(relief) * np.maximum(np.abs(relief) - t, 0.0)
     return np.clip(relief, -1.0, 1.0).astype(np.float32)
 
 
@@ -87,7 +119,8 @@ def detector_input(rgb: np.ndarray, depth: np.ndarray | None, config: "DetectorC
     if config.depth:
         if depth is None:
             raise ValueError("this detector reads depth (DetectorConfig.depth): pass the depth image")
-        x = torch.cat([x, torch.from_numpy(depth_relief(depth, holes=config.relief_holes))[None]], 0)
+        x = torch.cat([x, torch.from_numpy(depth_relief(depth, holes=config.relief_holes,
+                                                                denoise=config.relief_denoise))[None]], 0)
     return x
 
 
@@ -311,7 +344,10 @@ def load_detector(checkpoint: Path | str | None = None, device: str | None = Non
     from opend_mj.policy.learned import load_checkpoint
 
     def build(ckpt):
-        config = DetectorConfig(**ckpt["config"])
+        # a checkpoint from before ``relief_denoise`` learnt on a sensor's raw relief if it reads holes
+        # as holes (`opend train --depth-noise`), and reads it so; one of exact renders denoises
+        fields = {"relief_denoise": not ckpt["config"].get("relief_holes", False), **ckpt["config"]}
+        config = DetectorConfig(**fields)
         return build_detector(config), config
 
     return load_checkpoint(checkpoint, DEFAULT_CHECKPOINT, "detector", "opend train --solver fasterrcnn", build,
