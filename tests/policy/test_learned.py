@@ -486,6 +486,7 @@ def test_depth_relief_ignores_a_sensors_holes(cabinet_depth):
     # read as surfaces 10 m away (the detectors trained on exact renders), the stripe's rim stands proud
     assert depth_relief(holed, holes=False)[96, 100] > 0.5
 
+
 def test_depth_relief_reads_a_noisy_panel_flat(cabinet_depth):
     """Under a noisy sensor (4 mm per pixel, about a strong sensor's at 2 m after fusing frames) the
     flat panel's relief is noise the detector never saw on exact renders: soft-thresholded at two

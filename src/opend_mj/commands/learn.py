@@ -122,7 +122,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
                              max_size=max(min_size, 640) if min_size else None, kinds=kinds,
                              depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn",
-                             relief_holes=depth_noise > 0)
+                             relief_holes=depth_noise > 0, relief_denoise=depth_noise == 0)
         meta = TD.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
                                   init=init, depth_noise=depth_noise, log=click.echo, **common)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")

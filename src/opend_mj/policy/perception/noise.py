@@ -8,6 +8,25 @@ import math
 
 import numpy as np
 
+#: Where the camera frames the cabinet's front: rows from, to; columns from, to (fractions of the
+#: image). Perception reads the front's depth and its noise there.
+FRONT_WINDOW = (0.3, 0.7, 0.35, 0.65)
+
+
+def front_window(shape: tuple, window: tuple = FRONT_WINDOW, step: int = 1) -> tuple[slice, slice]:
+    """The (rows, columns) slices of ``window`` in an image of ``shape``, every ``step``-th column."""
+    h, w = shape[:2]
+    r0, r1, c0, c1 = window
+    return slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1), max(1, int(step)))
+
+
+def front_noise(x: np.ndarray, ok: np.ndarray, floor: float, window: tuple = FRONT_WINDOW,
+                step: int = 1) -> float:
+    """:func:`pixel_noise` of ``x`` (valid where ``ok``) over ``window`` (:func:`front_window`), from
+    every ``step``-th column (columns averaged together are not independent)."""
+    rows, cols = front_window(x.shape, window, step)
+    return pixel_noise(x[rows, cols], ok[rows, cols], floor)
+
 
 def pixel_noise(x: np.ndarray, ok: np.ndarray, floor: float) -> float:
     """The noise (m, one sigma) of a grid of world coordinates ``x`` (valid where ``ok``): the robust

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from opend_mj.policy.perception.noise import pixel_noise
+from opend_mj.policy.perception.noise import FRONT_WINDOW, front_noise, front_window
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class ProposalConfig:
     #: the cabinet there). 0: keep every group.
     front_band: float = 0.2
     front_percentile: float = 20.0
-    front_window: tuple = (0.3, 0.7, 0.35, 0.65)
+    front_window: tuple = FRONT_WINDOW
     #: A square-ish group (box sides within ``square_aspect`` of each other) must fill ``min_fill``
     #: of its box: a knob or a bar's end fills most of it (two thirds or more), the corner of a
     #: raised panel's frame (an L) about half. 0: off.
@@ -92,14 +92,14 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
     d = np.where(np.isfinite(depth), depth, np.nanmax(depth[np.isfinite(depth)]) if np.isfinite(depth).any() else 0.0)
     pts = view.backproject(uu.ravel(), vv.ravel(), d.ravel()).reshape(h, w, 3)
     read = np.isfinite(depth) & (depth > 0)
-    sigma = _front_noise(pts[..., 0], read, config)
+    sigma = front_noise(pts[..., 0], read, config.noise_floor, config.front_window)
     if config.noise_sigmas * sigma <= config.min_protrusion:  # exact depth, or noise below the threshold
         return _search(pts, replace(config, min_pixels=max(config.min_pixels, config.noise_min_pixels))
                        if sigma > 0 else config)
     out: list = []
     for rows, cols in ((1, 1), *config.noise_windows):
         x = pts[..., 0] if rows * cols == 1 else _window_mean(pts[..., 0], read, rows, cols)
-        noise = sigma if rows * cols == 1 else _front_noise(x, read, config, step=cols)
+        noise = sigma if rows * cols == 1 else front_noise(x, read, config.noise_floor, config.front_window, step=cols)
         found = _search(np.concatenate([x[..., None], pts[..., 1:]], axis=-1), replace(
             config, min_protrusion=max(config.min_protrusion, config.noise_sigmas * noise),
             min_pixels=max(config.min_pixels, config.noise_min_pixels, 2 * rows * cols)))
@@ -115,15 +115,6 @@ def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalC
 
 def _area(box) -> float:
     return float((box[2] - box[0]) * (box[3] - box[1]))
-
-
-def _front_noise(x: np.ndarray, read: np.ndarray, config: ProposalConfig, step: int = 1) -> float:
-    """The noise (m) of world x where the camera frames the cabinet (``config.front_window``), from
-    every ``step``-th column (columns averaged together are not independent)."""
-    h, w = x.shape
-    r0, r1, c0, c1 = config.front_window
-    rows, cols = slice(int(h * r0), int(h * r1)), slice(int(w * c0), int(w * c1), max(1, int(step)))
-    return pixel_noise(x[rows, cols], read[rows, cols], config.noise_floor)
 
 
 def _window_mean(x: np.ndarray, read: np.ndarray, rows: int, cols: int) -> np.ndarray:
@@ -183,8 +174,7 @@ def _search(pts: np.ndarray, config: ProposalConfig) -> list[tuple]:
 
     cabinet_front = None
     if config.front_band > 0:
-        r0, r1, c0, c1 = config.front_window
-        centre = x[int(h * r0):int(h * r1), int(w * c0):int(w * c1)]
+        centre = x[front_window(x.shape, config.front_window)]
         cabinet_front = float(np.percentile(centre, config.front_percentile)) if centre.size else None
 
     def on_front(group_x: float) -> bool:

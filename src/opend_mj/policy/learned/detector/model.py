@@ -42,8 +42,9 @@ class DetectorConfig:
     relief_holes: bool = False
     #: Noisy depth's relief soft-thresholded at its own noise (:func:`depth_relief` ``denoise``):
     #: exact depth is unchanged, so a checkpoint trained on exact renders reads noisy images as it
-    #: read its training ones, panels flat. (``checkpoints/fasterrcnn_sensor.pt`` learnt the raw
-    #: noisy relief and reads it raw: :func:`load_detector`.)
+    #: read its training ones, panels flat. A detector trained on a sensor's depth (`opend train
+    #: --depth-noise`, as ``checkpoints/fasterrcnn_sensor.pt``) learns the raw noisy relief and reads
+    #: it raw (False; :func:`load_detector` for checkpoints from before this field).
     relief_denoise: bool = True
 
     @property
@@ -64,21 +65,17 @@ RELIEF_SCALE = 0.05
 #: panel reads flat, as on the exact renders the detector learnt from, while a handle, centimetres
 #: proud, keeps most of its relief. Exact depth reads no noise and is unchanged.
 RELIEF_NOISE_SIGMAS = 2.0
-#: Where the noise is read: rows from, to; columns from, to (fractions of the image: the camera
-#: frames the cabinet's front there), and the noise (m) below which depth counts as exact.
-RELIEF_NOISE_WINDOW = (0.3, 0.7, 0.35, 0.65)
+#: Depth noise (m, one sigma) below which depth counts as exact.
 RELIEF_NOISE_FLOOR = 0.001
 
 
 def relief_noise(depth: np.ndarray) -> float:
-    """The depth noise (m, one sigma) of ``depth`` over ``RELIEF_NOISE_WINDOW``
-    (:func:`opend_mj.policy.perception.noise.pixel_noise`; 0 for exact depth)."""
-    from opend_mj.policy.perception.noise import pixel_noise
+    """The depth noise (m, one sigma) of ``depth`` where the camera frames the cabinet's front
+    (:func:`opend_mj.policy.perception.noise.front_window`; 0 for exact depth)."""
+    from opend_mj.policy.perception.noise import front_window, pixel_noise
 
-    d = np.nan_to_num(np.asarray(depth, np.float32), nan=0.0, posinf=0.0)
-    h, w = d.shape
-    r0, r1, c0, c1 = RELIEF_NOISE_WINDOW
-    window = d[int(h * r0):int(h * r1), int(w * c0):int(w * c1)]
+    d = np.asarray(depth, np.float32)
+    window = np.nan_to_num(d[front_window(d.shape)], nan=0.0, posinf=0.0)
     return pixel_noise(window, window > 0.05, RELIEF_NOISE_FLOOR)
 
 
