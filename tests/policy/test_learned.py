@@ -677,7 +677,7 @@ def test_a_thin_pull_is_a_candidate_only_where_the_model_points_at_it(front_view
     prob = np.zeros((256, 256), np.float32)
     prob[165:178, 100:150] = 0.8  # the map: the bottom pull
     prob[65:78, 100:150] = 0.3
-    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=False)
+    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=False, noise_windows=True)
     proposals = CLIPortSolver._proposals(solver, prob, depth, view)
     assert sorted(b[1] for b, _ in proposals) == [70, 170]  # not the middle pull: the map is 0 there
     box = choose_proposal(prob, proposals, "bottom drawer", depth, view)
@@ -704,12 +704,48 @@ def test_a_thin_pull_joins_where_it_stacks_under_a_handle(front_view, thin_pulls
     depth[195:197, 150:180] = 1.995  # a strip 5 mm proud, shorter, off the column
     prob = np.zeros((256, 256), np.float32)
     prob[65:78, 100:150] = 0.8  # the map sees only the top pull (the one standing 3 cm proud)
-    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=True)
+    solver = SimpleNamespace(thin=True, thin_fraction=0.5, thin_stack=True, noise_windows=True)
     proposals = CLIPortSolver._proposals(solver, prob, depth, view)
     assert sorted(b[1] for b, _ in proposals) == [70, 120, 170], [b for b, _ in proposals]
     assert choose_proposal(prob, proposals, "bottom drawer", depth, view)[1] == 170
     solver.thin_stack = False
     assert [b[1] for b, _ in CLIPortSolver._proposals(solver, prob, depth, view)] == [70]
+
+
+def test_cliport_finds_a_bar_that_sinks_into_a_real_sensors_noise(front_view):
+    """A front 2 m off the strong depth sensor (8 mm of noise after 8 fused frames) with a vertical
+    bar 1 px wide, 2 cm proud, where the map points: the image alone loses the bar in some draws,
+    the depth averaged along bars (``noise_windows``) finds it in every one, and CLIPort answers
+    with its box; the map reads the sensor's missing pixels as their nearest reading."""
+    from types import SimpleNamespace
+
+    from opend_mj.policy.learned.affordance import CLIPortSolver, choose_proposal
+    from opend_mj.policy.perception.noise import fill_holes
+    from opend_mj.sim.perturb import sensor_depth
+
+    depth = np.full((256, 256), 3.0, np.float32)
+    depth[40:216, 40:216] = 2.0
+    depth[60:92, 80:81] = 1.98  # the bar
+    prob = np.zeros((256, 256), np.float32)
+    prob[58:94, 76:85] = 0.9  # the map: on the bar
+    grey = np.full((256, 256, 3), 128, np.uint8)
+    averaged = SimpleNamespace(thin=False, noise_windows=True)
+    alone = SimpleNamespace(thin=False, noise_windows=False)
+    lost_alone = 0
+    for seed in range(4):
+        noisy = sensor_depth(grey, depth, "strong", seed, frames=8)
+        box = choose_proposal(prob, CLIPortSolver._proposals(averaged, prob, noisy, front_view), "door", noisy,
+                              front_view)
+        assert box is not None and box[0] <= 80.5 <= box[2] and box[1] <= 76 <= box[3], (seed, box)
+        found = choose_proposal(prob, CLIPortSolver._proposals(alone, prob, noisy, front_view), "door", noisy,
+                                front_view)
+        lost_alone += found is None or not (found[0] <= 80.5 <= found[2] and found[1] <= 76 <= found[3])
+        filled = fill_holes(noisy)
+        assert (noisy == 0).any() and (filled > 1.9).all()  # holes read as the surfaces around them
+    assert lost_alone >= 1
+    exact = [b for b, _ in CLIPortSolver._proposals(averaged, prob, depth, front_view)]
+    assert exact == [b for b, _ in CLIPortSolver._proposals(alone, prob, depth, front_view)]
+    assert np.array_equal(fill_holes(depth), depth)
 
 
 def test_the_detectors_kind_calls_are_probabilities_where_it_sees_background(tiny_data):

@@ -23,7 +23,10 @@ plausible ones, and where the instruction names a position Algorithm 1's matchin
 scoring one is taken. For a drawer, the plausible set takes in the rest of each plausible
 handle's stack (`drawer_stack`): drawers stacked in a column carry the same handle, and a position
 such as "middle" or "second bottom" is only right among the whole stack, which the map's scores
-alone often cut short. The map says which handle is meant, depth where it is exactly. Without
+alone often cut short. The map says which handle is meant, depth where it is exactly. Under a
+noisy depth sensor the proposals also come from the depth averaged along bars and over knobs
+(``noise_windows``), and the map reads the sensor's missing pixels as their nearest reading
+(``fill_holes``); exact depth reads as without. Without
 proposals (``proposals=False``, or none found) the handle centre is the probability-weighted
 centroid of the connected region above half the peak around the arg-max; the box is that region's
 bounding box (at least ``min_box`` px on each side); the orientation comes from the region's
@@ -302,7 +305,8 @@ class CLIPortSolver:
 
     def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
                  canonical: bool = True, proposals: bool = True, plausible_fraction: float = 0.05,
-                 heat_sigma: float = 6.0, thin: bool = True, thin_fraction: float = 0.5, thin_stack: bool = True):
+                 heat_sigma: float = 6.0, thin: bool = True, thin_fraction: float = 0.5, thin_stack: bool = True,
+                 noise_windows: bool = True, fill_holes: bool = True):
         self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
         self.min_box = min_box
         #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
@@ -321,6 +325,14 @@ class CLIPortSolver:
         #: one pull design down a stack of drawers, seen clearly by the map on one of them. Faster
         #: R-CNN's solver has no such rule: there it did not help.
         self.thin_stack = thin_stack
+        #: Under a noisy sensor, the depth proposals also search the depth averaged along bars and
+        #: over knobs (:data:`opend_mj.policy.perception.proposals.NOISE_WINDOWS`); the map's score
+        #: then chooses among them as among the others. Exact depth reads as without.
+        self.noise_windows = noise_windows
+        #: The map reads a sensor's missing pixels as their nearest reading
+        #: (:func:`opend_mj.policy.perception.noise.fill_holes`), as on its training renders, which
+        #: have none; the proposals still see the holes as holes.
+        self.fill_holes = fill_holes
         self.last_map: np.ndarray | None = None
 
     #: :meth:`solve` takes ``observed``: handles whose kind the robot saw by moving them.
@@ -334,7 +346,10 @@ class CLIPortSolver:
 
         if self.canonical:
             instruction = canonical_instruction(instruction)
-        prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
+        from opend_mj.policy.perception.noise import fill_holes
+
+        prob = predict(self.model, self.config, self.text, rgb, fill_holes(depth) if self.fill_holes else depth,
+                       instruction)
         self.last_map = prob
         if self.proposals and camera_view is not None:
             chosen = choose_proposal(prob, self._proposals(prob, depth, camera_view), instruction, depth, camera_view,
@@ -346,9 +361,11 @@ class CLIPortSolver:
 
     def _proposals(self, prob: np.ndarray, depth, camera_view) -> list:
         """The depth proposals, and the thin ones the map peaks on (see ``thin``)."""
-        from opend_mj.policy.perception import handle_proposals, thin_proposals
+        from opend_mj.policy.perception import ProposalConfig, handle_proposals, thin_proposals
+        from opend_mj.policy.perception.proposals import NOISE_WINDOWS
 
-        main = handle_proposals(depth, camera_view)
+        main = handle_proposals(depth, camera_view,
+                                ProposalConfig(noise_windows=NOISE_WINDOWS if self.noise_windows else ()))
         if not self.thin:
             return main
         top = float(prob.max())

@@ -39,3 +39,17 @@ def pixel_noise(x: np.ndarray, ok: np.ndarray, floor: float) -> float:
     second = (x[:, 2:] - 2.0 * x[:, 1:-1] + x[:, :-2])[triple]
     sigma = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6.0)
     return sigma if sigma >= floor else 0.0
+
+
+def fill_holes(depth: np.ndarray) -> np.ndarray:
+    """``depth`` (m) with a sensor's missing pixels (0, or not finite) set to the nearest pixel with
+    a reading: a model trained on renders, which have none, reads a hole as a surface right at the
+    lens. Depth without holes comes back unchanged."""
+    d = np.asarray(depth, np.float32)
+    missing = ~np.isfinite(d) | (d <= 0)
+    if not missing.any() or missing.all():
+        return d
+    from scipy.ndimage import distance_transform_edt
+
+    nearest = distance_transform_edt(missing, return_distances=False, return_indices=True)
+    return d[tuple(nearest)]

@@ -71,14 +71,14 @@ class ProposalConfig:
     #: over its face. Groups found there join the proposals, replacing the smaller ones they overlap
     #: (the pieces noise cut a bar into; either holds the other's centre); a group there holds at
     #: least twice a window's pixels (averaged noise comes in blobs of a window's size). The averaged
-    #: copies also propose edges that noise blurred into ridges, so a solver uses them only if it can
-    #: reject a proposal (`NOISE_WINDOWS`). Empty: the image alone, as without noise.
+    #: copies also propose edges that noise blurred into ridges, so a solver uses them where its model
+    #: chooses among the proposals (`NOISE_WINDOWS`). Empty: the image alone, as without noise.
     noise_windows: tuple = ()
 
 
-#: The averaging windows of :attr:`ProposalConfig.noise_windows` for a solver whose model scores
-#: each proposal's own box (Faster R-CNN's head): along a vertical bar, along a horizontal one, and
-#: over a knob's face.
+#: The averaging windows of :attr:`ProposalConfig.noise_windows` for a solver whose model chooses
+#: among the proposals (Faster R-CNN's head scores each one's box, CLIPort's map its pixels): along a
+#: vertical bar, along a horizontal one, and over a knob's face.
 NOISE_WINDOWS = ((9, 1), (1, 9), (3, 3))
 
 
