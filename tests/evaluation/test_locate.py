@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -95,3 +96,34 @@ def test_the_sensor_trained_detector_locates_handles_in_a_real_sensors_depth(sma
     records = evaluate_locate(small_dataset, "fasterrcnn-sensor", split="all", limit=8, progress=False,
                               perturb="depth_noise=strong")
     assert sum(r.verdict == "located" for r in records) >= 6, [(r.cabinet, r.joint, r.verdict) for r in records]
+
+
+def test_the_box_is_graded_as_the_planner_acts_on_it(monkeypatch):
+    """A solver's box over a pair of pulls is graded as the planner acts on it (`settle_box`): narrowed
+    to the nearer pull, which is the other target's handle here, so it is the wrong handle, though
+    the raw box's centre lies within the named one's margin."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    import opend_mj.evaluation.locate as locate
+    import opend_mj.policy.factory as factory
+    from opend_mj.policy.handle import HandleBox
+
+    depth = np.full((64, 128), 1.0, np.float32)
+    depth[30:34, 42:61] = 0.965  # the left pull, 3.5 cm proud, the nearer to the box's centre (u = 63)
+    depth[30:34, 67:86] = 0.965  # the right pull, the named one
+    boxes = {"left": (42, 30, 61, 34), "right": (66, 30, 86, 34)}
+    job = SimpleNamespace(cabinet="c", joint="right", split="test", seed=0, light_scale=1.0, paraphrase=0,
+                          perturb=None)
+    task = SimpleNamespace(instruction="right drawer", target=SimpleNamespace(kind="drawer"))
+    monkeypatch.setattr(locate, "locate_jobs", lambda *a, **k: [job])
+    monkeypatch.setattr(locate, "locate_frames", lambda jobs: iter([(job, task, None, depth, None, boxes)]))
+
+    class Pair:
+        def solve(self, rgb, depth, instruction, view):
+            return HandleBox(40, 30, 86, 34, orientation="horizontal", from_depth=True)
+
+    monkeypatch.setattr(factory, "build_solver", lambda name, ground_truth=None: Pair())
+    (record,) = locate.evaluate_locate(Path("unused"), "pair", progress=False)
+    assert record.verdict == "located" and record.verdict_refined == "wrong_handle"

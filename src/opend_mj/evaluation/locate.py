@@ -10,8 +10,9 @@ simulator's handle boxes of every target:
 * ``wrong_handle``: it lies inside another target's handle box instead;
 * ``missed``: no box, or a centre on no handle.
 
-Both the solver's raw box and the box after the planner's depth refinement (what the planner acts on
-for learned solvers) are graded.
+Both the solver's raw box and the box the planner acts on (`policy.planner.loop.settle_box`: a
+learned solver's box snapped to depth, a box over a pair of pulls narrowed to the nearer one) are
+graded.
 """
 
 from __future__ import annotations
@@ -102,12 +103,14 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
     given); writes the records to ``out`` (JSONL) if given."""
     from tqdm import tqdm
 
-    from opend_mj.policy.perception import refine_box_with_depth, snaps_to_depth
     from opend_mj.policy.factory import build_solver
+    from opend_mj.policy.planner.config import PlannerConfig
+    from opend_mj.policy.planner.loop import settle_box
 
     jobs = locate_jobs(cabinets_dir, split, seed, light_scale, paraphrase, limit, perturb=perturb)
     state: dict = {}
     solver = build_solver(solver_name, ground_truth=lambda: state["boxes"][state["joint"]])
+    planner_config = PlannerConfig()
     records: list[LocateRecord] = []
     bar = tqdm(total=len(jobs), desc=f"locate ({solver_name})", unit="target", disable=not progress,
                dynamic_ncols=True)
@@ -116,9 +119,8 @@ def evaluate_locate(cabinets_dir: Path, solver_name: str, split: str = "test", s
         state.update(boxes=boxes, joint=job.joint)
         found = solver.solve(rgb, depth, task.instruction, view)
         box = list(found.as_tuple()) if found is not None else None
-        refined = box
-        if snaps_to_depth(solver, found):
-            refined = list(refine_box_with_depth(found, depth, view).as_tuple())
+        settled, _ = settle_box(solver, found, depth, view, planner_config)
+        refined = list(settled.as_tuple()) if settled is not None else None
         gt = boxes.get(job.joint)
         records.append(LocateRecord(
             cabinet=job.cabinet, joint=job.joint, split=job.split, target_type=task.target.kind,
@@ -168,8 +170,8 @@ def summarise(records: list[LocateRecord]) -> list[dict]:
 def format_summary(rows: list[dict]) -> str:
     """A Markdown table of :func:`summarise`'s rows; with several seeds, a column of each seed's rate."""
     several = any(len(r.get("seeds", ())) > 1 for r in rows)
-    head = ("| solver | kind | targets | located % | wrong handle % | missed % | located after depth snap % | "
-            "wrong handle after snap % |")
+    head = ("| solver | kind | targets | located % | wrong handle % | missed % | located as the planner acts % | "
+            "wrong handle as the planner acts % |")
     lines = [head + (" located per seed % |" if several else ""), "|---" * (9 if several else 8) + "|"]
     for r in rows:
         line = (f"| {r['solver']} | {r['kind']} | {r['targets']} | {r['located']} | {r['wrong_handle']} | "
