@@ -113,7 +113,7 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
         from opend_mj.policy.learned.affordance import AffordanceConfig
 
         cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
-                               text_encoder=text_encoder, reword=reword)
+                               text_encoder=text_encoder, reword=reword, fill_holes=depth_noise == 0)
         meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
                                init=init, depth_noise=depth_noise, log=click.echo, **common)
     else:

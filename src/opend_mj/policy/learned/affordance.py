@@ -26,7 +26,7 @@ such as "middle" or "second bottom" is only right among the whole stack, which t
 alone often cut short. The map says which handle is meant, depth where it is exactly. Under a
 noisy depth sensor the proposals also come from the depth averaged along bars and over knobs
 (``noise_windows``), and the map reads the sensor's missing pixels as their nearest reading
-(``fill_holes``); exact depth reads as without. Without
+(:attr:`AffordanceConfig.fill_holes`); exact depth reads as without. Without
 proposals (``proposals=False``, or none found) the handle centre is the probability-weighted
 centroid of the connected region above half the peak around the arg-max; the box is that region's
 bounding box (at least ``min_box`` px on each side); the orientation comes from the region's
@@ -57,6 +57,11 @@ class AffordanceConfig:
     #: rewording of it (`opend_mj.language.rewordings`), for a model that reads words as people say
     #: them (a solver with ``canonical=False``); 0: Algorithm 1's templates only.
     reword: float = 0.0
+    #: The map reads a sensor's missing pixels (depth 0) as their nearest reading
+    #: (:func:`opend_mj.policy.perception.noise.fill_holes`), as on exact training renders, which have
+    #: none. A model trained on a sensor's depth (`opend train --solver cliport --depth-noise`) learnt
+    #: holes as 0 m and reads them so (False). Depth without holes reads the same either way.
+    fill_holes: bool = True
 
 
 def _torch():
@@ -285,9 +290,11 @@ def load_affordance(checkpoint: Path | str | None = None, device: str | None = N
 
 def predict(model, config: AffordanceConfig, text, rgb, depth, instruction: str) -> np.ndarray:
     """Probability map (H, W) at the image's resolution."""
+    from opend_mj.policy.perception.noise import fill_holes
+
     torch, _, F = _torch()
     device = next(model.parameters()).device
-    x = prepare_image(rgb, depth, config.image_size)[None].to(device)
+    x = prepare_image(rgb, fill_holes(depth) if config.fill_holes else depth, config.image_size)[None].to(device)
     t = torch.from_numpy(text.encode([instruction])).to(device)
     with torch.no_grad():
         logits = model(x, t)
@@ -306,7 +313,7 @@ class CLIPortSolver:
     def __init__(self, checkpoint: Path | str | None = None, device: str | None = None, min_box: float = 4.0,
                  canonical: bool = True, proposals: bool = True, plausible_fraction: float = 0.05,
                  heat_sigma: float = 6.0, thin: bool = True, thin_fraction: float = 0.5, thin_stack: bool = True,
-                 noise_windows: bool = True, fill_holes: bool = True):
+                 noise_windows: bool = True):
         self.model, self.config, self.text, self.checkpoint = load_affordance(checkpoint, device)
         self.min_box = min_box
         #: Read the instruction through Algorithm 1's parser first (`language.canonical_instruction`),
@@ -329,10 +336,6 @@ class CLIPortSolver:
         #: over knobs (:data:`opend_mj.policy.perception.proposals.NOISE_WINDOWS`); the map's score
         #: then chooses among them as among the others. Exact depth reads as without.
         self.noise_windows = noise_windows
-        #: The map reads a sensor's missing pixels as their nearest reading
-        #: (:func:`opend_mj.policy.perception.noise.fill_holes`), as on its training renders, which
-        #: have none; the proposals still see the holes as holes.
-        self.fill_holes = fill_holes
         self.last_map: np.ndarray | None = None
 
     #: :meth:`solve` takes ``observed``: handles whose kind the robot saw by moving them.
@@ -346,10 +349,7 @@ class CLIPortSolver:
 
         if self.canonical:
             instruction = canonical_instruction(instruction)
-        from opend_mj.policy.perception.noise import fill_holes
-
-        prob = predict(self.model, self.config, self.text, rgb, fill_holes(depth) if self.fill_holes else depth,
-                       instruction)
+        prob = predict(self.model, self.config, self.text, rgb, depth, instruction)
         self.last_map = prob
         if self.proposals and camera_view is not None:
             chosen = choose_proposal(prob, self._proposals(prob, depth, camera_view), instruction, depth, camera_view,
