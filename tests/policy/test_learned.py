@@ -529,8 +529,11 @@ def test_detector_training_can_read_a_real_sensors_depth(tiny_data):
 
 def test_cliport_training_can_read_a_real_sensors_depth(tiny_data):
     """`opend train --solver cliport --depth-noise P`: the depth channel of a share P of the training
-    images is the depth_noise sensor's (holes read 0 m), the same for the same random stream."""
+    images is the depth_noise sensor's, the same for the same random stream; its holes reach the model
+    as prediction gives them (0 m for a model that reads holes, `fill_holes=False`, as the CLI trains
+    it; else filled). The strong sensor's validation images are one draw per image, whatever the stream."""
     import random
+    from dataclasses import replace
 
     from opend_mj.policy.learned.affordance import AffordanceConfig
     from opend_mj.policy.learned.data import load_records
@@ -539,16 +542,22 @@ def test_cliport_training_can_read_a_real_sensors_depth(tiny_data):
 
     data, _ = tiny_data
     recs = load_records(data)
-    cfg = AffordanceConfig(text_encoder="bow", image_size=256)
+    cfg = AffordanceConfig(text_encoder="bow", image_size=256, fill_holes=False)
     text = CachedEncoder("bow")
 
-    def depth_channel(p, seed):
-        x, _, _ = _cliport_batch(data, recs, [(0, 0)], text, cfg, True, random.Random(seed), depth_noise=p)
+    def depth_channel(p, seed, config=cfg, augment=True, sensor=None):
+        x, _, _ = _cliport_batch(data, recs, [(0, 0)], text, config, augment, random.Random(seed), depth_noise=p,
+                                 sensor=sensor)
         return x[0, 3].numpy()
 
     clean, noisy = depth_channel(0.0, 2), depth_channel(1.0, 2)
     assert (noisy == noisy.min()).sum() > (clean == clean.min()).sum() + 100  # the sensor's holes
     assert np.array_equal(noisy, depth_channel(1.0, 2))
+    filled = depth_channel(1.0, 2, replace(cfg, fill_holes=True))
+    assert (filled == filled.min()).sum() < (noisy == noisy.min()).sum() - 100
+    val = depth_channel(0.0, 1, augment=False, sensor="strong")
+    assert not np.array_equal(val, depth_channel(0.0, 1, augment=False))
+    assert np.array_equal(val, depth_channel(0.0, 7, augment=False, sensor="strong"))
 
 
 def test_depth_verified_candidates_drop_an_edge_the_detector_takes_for_a_handle():

@@ -85,7 +85,8 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
                    "checkpoint seeds both kinds).")
 @click.option("--depth-noise", type=click.FloatRange(0, 1), default=0.0, show_default=True,
               help="Chance that a training image's depth is a real sensor's (noise and holes, `--perturb "
-                   "depth_noise` at a level drawn per image); fasterrcnn's validation adds the strong sensor's recall.")
+                   "depth_noise` at a level drawn per image); validation adds the strong sensor's images, "
+                   "and the epoch kept is the best mean of both.")
 @click.option("--progress/--no-progress", default=True)
 def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, resume, device, threads, backbone,
           box_head_dim, min_size, fusion_layers, fusion, image_size, text_encoder, reword, evaluate_subset, threshold,
