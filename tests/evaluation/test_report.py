@@ -119,3 +119,35 @@ def test_report_reads_every_hands_bc_records(tmp_path):
     assert rows["Franka gripper"][7] == "- / -"
     page = write_report(results, tmp_path / "results.md").read_text()
     assert "## Behaviour cloning" in page and "results/bc/HAND_shipped_test.jsonl" in page
+
+
+def test_report_points_between_two_runs_of_one_robustness_cell(tmp_path):
+    """A real-cabinet table and a later run of one of its axes (`opend robustness --axis`) on the same
+    cabinets: each table's section names the other, so a reader finds both; tables drawn from the
+    same records (the same counts) are not cross-referenced."""
+    from opend_mj.evaluation.report import robustness_sections
+
+    def table(label, strong, axes=("depth_noise", "light"), hand="allegro"):
+        conds = {"nominal": {"successes": 250, "episodes": 266, "rate": 94.0, "ci95": [90.5, 96.3]}}
+        for axis in axes:
+            for level, k in (("mild", 240), ("strong", strong)):
+                conds[f"{axis}={level}"] = {"successes": k, "episodes": 266, "rate": 100.0 * k / 266,
+                                            "ci95": [0.0, 100.0], "delta": 100.0 * (k - 250) / 266,
+                                            "within_band": True}
+        return {"label": label, "command": "opend robustness", "bands": {"mild": 5.0, "strong": 15.0},
+                "rows": [{"solver": "cliport", "hand": hand, "conditions": conds}]}
+
+    real = tmp_path / "results" / "real"
+    real.mkdir(parents=True)
+    (real / "robustness_all_cliport.json").write_text(json.dumps(table("opend-train", 200)))
+    (real / "robustness_all_depth_noise_cliport.json").write_text(
+        json.dumps(table("opend-train", 220, axes=("depth_noise",))))
+    (real / "robustness_all_copy.json").write_text(json.dumps(table("opend-train", 200, axes=("light",))))
+    (real / "robustness_other.json").write_text(json.dumps(table("elsewhere", 100)))
+    text = "\n".join(robustness_sections(tmp_path / "results"))
+    again = [line for line in text.splitlines() if line.startswith("Also in another run")]
+    assert again == [
+        "Also in another run (with its own nominal): `depth_noise` of cliport (allegro) in "
+        "`results/real/robustness_all_depth_noise_cliport.json`.",
+        "Also in another run (with its own nominal): `depth_noise` of cliport (allegro) in "
+        "`results/real/robustness_all_cliport.json`."]

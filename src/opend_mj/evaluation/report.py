@@ -280,14 +280,58 @@ def robustness_sections(results_dir: Path) -> list[str]:
     out = []
     for title, paths in (("generated cabinets", sorted((results_dir / "robustness").glob("*.json"))),
                          ("real cabinets", sorted((results_dir / "real").glob("robustness_*.json")))):
-        for path in paths:
-            table = load_table(path)
+        tables = {path: load_table(path) for path in paths}
+        for path, table in tables.items():
             full = [p.relative_to(results_dir.parent).as_posix() for p in (path.with_suffix(".md"),
                                                                            path.with_suffix(".png")) if p.is_file()]
             out += [table_summary_markdown(table, f"Robustness, {title} (`{path.relative_to(results_dir.parent)}`)"),
                     f"Made by: `{table.get('command') or 'opend robustness'}` ({table.get('label', '')}); "
                     f"every cell: {', '.join(f'`{p}`' for p in full) or 'the JSON'}; docs/robustness.md.", ""]
+            again = measured_again(path, tables)
+            if again:
+                out += ["Also in another run (with its own nominal): " + "; ".join(
+                    f"{axes} of {entry} in `{other.relative_to(results_dir.parent).as_posix()}`"
+                    for other, axes, entry in again) + ".", ""]
     return out
+
+
+def _axis_cells(table: dict) -> dict[tuple[str, str, str], tuple]:
+    """(solver, hand, axis) -> the counts (nominal, then each level of the axis) of every perturbed cell
+    of a robustness table."""
+    cells: dict[tuple[str, str, str], list] = {}
+    for row in table.get("rows", []):
+        conds = row.get("conditions", {})
+        nominal = conds.get("nominal", {})
+        for cond in sorted(conds):
+            if cond != "nominal":
+                cells.setdefault((row["solver"], row["hand"], cond.split("=")[0]),
+                                 [(nominal.get("successes"), nominal.get("episodes"))]).append(
+                    (cond, conds[cond].get("successes"), conds[cond].get("episodes")))
+    return {k: tuple(v) for k, v in cells.items()}
+
+
+def measured_again(path: Path, tables: dict[Path, dict]) -> list[tuple[Path, str, str]]:
+    """Where another table of the same cabinets, split and seed (``label``) holds cells of ``path``'s
+    table (the same solver, hand and axis) with other counts, i.e. from another run: (other table,
+    axes, "solver (hand, hand)") per other table, so a reader of either finds both runs. Tables
+    drawn from the same records hold the same counts and are not listed."""
+    table = tables[path]
+    mine = _axis_cells(table)
+    found = []
+    for other, t in tables.items():
+        if other == path or t.get("label") != table.get("label"):
+            continue
+        theirs = _axis_cells(t)
+        differ = sorted(k for k in mine.keys() & theirs.keys() if mine[k] != theirs[k])
+        if not differ:
+            continue
+        by_solver: dict[str, list[str]] = {}
+        for solver, hand, _ in differ:
+            if hand not in by_solver.setdefault(solver, []):
+                by_solver[solver].append(hand)
+        axes = ", ".join(f"`{a}`" for a in sorted({a for _, _, a in differ}))
+        found.append((other, axes, ", ".join(f"{s} ({', '.join(h)})" for s, h in by_solver.items())))
+    return found
 
 
 def update_readme(readme: Path, table: str) -> bool:
