@@ -51,6 +51,15 @@ def sensor_augment(rgb: np.ndarray, depth: np.ndarray, rng: random.Random, chanc
                         rng.getrandbits(31), rng.choice(SENSOR_FRAMES))
 
 
+def sensor_view(rgb: np.ndarray, depth: np.ndarray, level: str, image_id: int) -> np.ndarray:
+    """``depth`` as the depth_noise sensor at ``level`` gives it, fused over an episode's frames
+    (``SENSOR_FRAMES[-1]``): validation's view, one draw per image id, the same for every model."""
+    from opend_mj.sim.perturb import sensor_depth
+
+    return sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), level, int(image_id),
+                        SENSOR_FRAMES[-1])
+
+
 def _device(device: str | None):
     import torch
 
@@ -268,7 +277,7 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
     """Inputs, instruction embeddings and target masks of a batch. Augmentation: horizontal flips
     (the instruction mirrored), rewordings, and with chance ``depth_noise`` a real sensor's depth
     (:func:`sensor_augment`). ``sensor`` ("mild" / "strong", validation): every image's depth as that
-    sensor gives it, fused over an episode's frames, one draw per image id (the same for every model).
+    sensor gives it (:func:`sensor_view`).
     Depth reaches the model as :func:`affordance.predict` gives it (holes filled where the config says)."""
     import torch
 
@@ -289,10 +298,7 @@ def _cliport_batch(data_dir, records, pairs, text, config, augment: bool, rng: r
             instruction = training_instruction(instruction, rng, config.reword)
             depth = sensor_augment(rgb, depth, rng, depth_noise)
         if sensor is not None:
-            from opend_mj.sim.perturb import sensor_depth
-
-            depth = sensor_depth(np.ascontiguousarray(rgb), np.ascontiguousarray(depth), sensor, int(rec["id"]),
-                                 SENSOR_FRAMES[-1])
+            depth = sensor_view(rgb, depth, sensor, rec["id"])
         if config.fill_holes:
             depth = fill_holes(np.asarray(depth))
         x = prepare_image(rgb.copy(), depth.copy(), config.image_size)
@@ -418,26 +424,17 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
                 break
         train_seconds = time.time() - t0
         model.eval()
-        vl, hits = [], []
-        with torch.no_grad():
-            for b in range(0, len(val_pairs), batch_size):
-                chunk = val_pairs[b:b + batch_size]
-                x, t, y = _cliport_batch(data_dir, val_recs, chunk, text, config, False, rng)
-                logits = model(x.to(dev), t.to(dev))
-                vl.append(float(bce(logits, y.to(dev))) * len(chunk))
-                prob = torch.sigmoid(logits)[:, 0].cpu().numpy()
-                for p, (ri, ti) in zip(prob, chunk):
-                    box = np.asarray(val_recs[ri]["targets"][ti]["box"]) * (config.image_size / val_recs[ri]["width"])
-                    hits.append(cliport_hits(p, box))
+        val_loss, hits = _cliport_validate(model, data_dir, val_recs, val_pairs, text, config, batch_size, dev, rng,
+                                           bce)
         row = {"epoch": epoch + 1, "train_loss": float(np.mean(losses)) if losses else float("nan"),
-               "val_loss": float(np.sum(vl) / max(1, len(val_pairs))),
+               "val_loss": val_loss / max(1, len(val_pairs)),
                "val_centre_in_box": float(np.mean(hits)) if hits else float("nan"),
                "train_seconds": round(train_seconds, 1), "batches": len(losses), "complete": not stopped}
         summary = (f"train loss {row['train_loss']:.4f}  val loss {row['val_loss']:.4f}  "
                    f"val centre-in-box {row['val_centre_in_box']:.3f}")
         if depth_noise > 0:  # a sensor model is chosen on exact renders and the strong sensor alike
-            sensor_hits = _cliport_val_hits(model, data_dir, val_recs, val_pairs, text, config, batch_size, dev,
-                                            rng, SENSOR_LEVELS[-1])
+            _, sensor_hits = _cliport_validate(model, data_dir, val_recs, val_pairs, text, config, batch_size, dev,
+                                               rng, bce, sensor=SENSOR_LEVELS[-1])
             row["val_centre_in_box_sensor"] = float(np.mean(sensor_hits)) if sensor_hits else float("nan")
             row["val_centre_in_box_mean"] = 0.5 * (row["val_centre_in_box"] + row["val_centre_in_box_sensor"])
             summary += f"  under the strong sensor {row['val_centre_in_box_sensor']:.3f}"
@@ -451,21 +448,25 @@ def train_cliport(data_dir: Path, out: Path, config=None, epochs: int = 10, batc
     return json.loads(loop.out.with_suffix(".json").read_text())
 
 
-def _cliport_val_hits(model, data_dir, records, pairs, text, config, batch_size, dev, rng, sensor) -> list[bool]:
-    """Per validation target: the map's peak inside the target's box, every image's depth as
-    ``sensor`` gives it (:func:`_cliport_batch`)."""
+def _cliport_validate(model, data_dir, records, pairs, text, config, batch_size, dev, rng, bce,
+                      sensor: str | None = None) -> tuple[float, list[bool]]:
+    """One pass over the validation targets: the summed loss (times each batch's size) and, per
+    target, whether the map's peak lies inside its box; ``sensor``: every image's depth as that
+    depth_noise level gives it (:func:`_cliport_batch`)."""
     import torch
 
-    hits = []
+    loss, hits = 0.0, []
     with torch.no_grad():
         for b in range(0, len(pairs), batch_size):
             chunk = pairs[b:b + batch_size]
-            x, t, _ = _cliport_batch(data_dir, records, chunk, text, config, False, rng, sensor=sensor)
-            prob = torch.sigmoid(model(x.to(dev), t.to(dev)))[:, 0].cpu().numpy()
+            x, t, y = _cliport_batch(data_dir, records, chunk, text, config, False, rng, sensor=sensor)
+            logits = model(x.to(dev), t.to(dev))
+            loss += float(bce(logits, y.to(dev))) * len(chunk)
+            prob = torch.sigmoid(logits)[:, 0].cpu().numpy()
             for p, (ri, ti) in zip(prob, chunk):
                 box = np.asarray(records[ri]["targets"][ti]["box"]) * (config.image_size / records[ri]["width"])
                 hits.append(cliport_hits(p, box))
-    return hits
+    return loss, hits
 
 
 def evaluate_cliport(checkpoint: Path, data_dir: Path, subset: str = "val", device: str | None = None,

@@ -19,8 +19,9 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
-from opend_mj.policy.learned.train import (SENSOR_FRAMES, SENSOR_LEVELS, _device, _Loop, _optimise,
-                                           _valid_targets, iou, load_pretrained, plot_history, sensor_augment)
+from opend_mj.policy.learned.train import (SENSOR_LEVELS, _device, _Loop, _optimise,
+                                           _valid_targets, iou, load_pretrained, plot_history, sensor_augment,
+                                           sensor_view)
 
 
 def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev, config=None,
@@ -86,9 +87,7 @@ def evaluate_detector_model(model, data_dir: Path, records: list[dict], threshol
     for rec in tqdm(records, disable=not progress, desc="eval detector"):
         rgb, depth, _ = load_images(data_dir, rec)
         if sensor is not None:
-            from opend_mj.sim.perturb import sensor_depth
-
-            depth = sensor_depth(rgb, depth, sensor, int(rec["id"]), SENSOR_FRAMES[-1])
+            depth = sensor_view(rgb, depth, sensor, rec["id"])
         dets, _ = detect_handles(model, rgb, depth=depth)
         boxes = dets.boxes[dets.handle >= threshold]
         view = camera_view_of(rec)
