@@ -44,7 +44,7 @@ class Rollout:
             raise ValueError(f"DAgger beta must be within [0, 1], not {self.beta}")
 
     def episode(self, job, env, config) -> tuple[dict, object]:
-        """One episode of this round (:func:`rollout_episode`)."""
+        """One rollout episode of DAgger round ``round`` (:func:`rollout_episode`)."""
         return rollout_episode(job, env, config)
 
 
