@@ -51,6 +51,27 @@ def test_demos_read_back_with_the_documented_keys(demos_file):
         assert d.attrs["success"] and d.attrs["solver"] == "oracle" and d.attrs["open_ratio"] > 0.2
 
 
+def test_demos_watch_the_front_they_open(demos_file):
+    """Every step stores the front as a learner watches it (a depth image every 12 steps): it is not
+    seen before the first look, and a demo that opened its target ends with the front seen moved,
+    the grasp site near the handle as that motion carries it (the hand held it to the end or let go
+    within a hand's width)."""
+    from opend_mj.apps.demos import read_demos
+    from opend_mj.policy.perception import WATCH_DIM, WATCH_NAMES
+
+    out, _ = demos_file
+    _, demos = read_demos(out)
+    name = {k: i for i, k in enumerate(WATCH_NAMES)}
+    for d in demos:
+        w = d.obs["front_watch"]
+        assert w.shape == (d.num_samples, WATCH_DIM) and np.isfinite(w).all() and d.attrs["watch_every"] == 12
+        assert (w[:12, name["looked"]] == 0).all() and (w[12:, name["looked"]] == 1).all()
+        assert w[:, name["age"]].max() < 12 / 60 + 1e-4  # s since the latest look, a look every 12 steps
+        assert w[-1, name["seen"]] == 1
+        # a drawer's front is seen out by its travel, a door's turned (its handle carried toward the camera)
+        assert -w[-1, name["handle_dx"]] > 0.05, w[-1]
+
+
 def test_delta_actions_are_the_absolute_ones_in_the_gym_action_space(demos_file):
     """Applied to the commanded pose before each step, the delta action gives the absolute one (to the
     float32 the file stores both in)."""
@@ -170,7 +191,7 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
         ckpts[name] = tmp_path / f"bc_{name}.pt"
         result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out",
                                            str(ckpts[name]), "--steps", "20", "--batch-size", "16", "--d-model", "16",
-                                           "--no-progress", *extra])
+                                           "--watch", "0", "--no-progress", *extra])
         assert result.exit_code == 0, result.output
     pair = f"{ckpts['s0']},{ckpts['s1']}"
     bundle = tmp_path / "bundle.pt"
@@ -338,55 +359,77 @@ def test_training_demos_of_one_kind(demos_file):
     assert not Path("never.pt").exists()
 
 
-def test_dagger_rounds_label_the_policys_own_states_and_resume(demos_file, small_dataset, tmp_path):
-    """`opend train-policy --dagger 1`: round 0 trains on the demos; round 1 rolls that policy out,
-    the planner as expert labels every state it reaches (the rollouts are training data whether or
-    not they opened their part), trains again (from scratch: it is the final round, even with
-    ``--warm-start``), and validates each round on cabinets kept apart. A
-    second run finds every round done and runs no episode again."""
+def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_file, small_dataset, tmp_path):
+    """`opend train-policy --dagger 1`: round 0 trains on the demos; round 1 rolls that policy out at
+    its own episode seed, the planner as expert labels every state it reaches (the rollouts are
+    training data whether or not they opened their part), trains again from round 0's weights, and
+    each round is validated on cabinets kept apart and kept (float16 policy and figures) in
+    --keep-rounds; the final policy trains on every training cabinet from the best round. A second
+    run runs no episode and trains nothing again; a run with the build folder gone records the
+    rollouts again from the kept policies, the same episodes, and trains no kept round again."""
+    import torch
+
     from opend_mj.apps.dagger import split_cabinets
     from opend_mj.apps.demos import read_demos
     from opend_mj.evaluation.jobs import make_jobs
 
     out, _ = demos_file
-    folder = tmp_path / "dagger"
+    folder, keep = tmp_path / "dagger", tmp_path / "kept"
     args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "20",
             "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
-            str(folder), "--dagger-targets", "2", "--val-targets", "1", "--final-steps", "30", "--warm-start",
-            "--no-progress"]
+            str(folder), "--keep-rounds", str(keep), "--dagger-targets", "2", "--val-targets", "1",
+            "--final-steps", "30", "--no-progress"]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     summary = json.loads((tmp_path / "bc.json").read_text())["dagger"]
     assert [r["round"] for r in summary["rounds"]] == [0, 1]
     assert all(r["val_episodes"] == 1 and 0.0 <= r["val_success"] <= 100.0 for r in summary["rounds"])
     assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
-    steps = [json.loads((folder / f"policy_{i}.json").read_text())["config"]["steps"] for i in (0, 1)]
-    assert steps == [20, 30]  # the last round, whose policy is shipped, trains for --final-steps
-    inits = [json.loads((folder / f"policy_{i}.json").read_text())["init"] for i in (0, 1)]
-    assert inits == [None, None]  # the final round trains from scratch on all the data, --warm-start or not
-    chosen = summary["rounds"][summary["chosen"]]  # the shipped policy: the best on validation
-    assert chosen["val_success"] == max(r["val_success"] for r in summary["rounds"])
-    assert (tmp_path / "bc.pt").read_bytes() == Path(chosen["checkpoint"]).read_bytes()
+    kept = [json.loads((keep / f"round_{i}.json").read_text()) for i in (0, 1)]
+    assert [k["steps"] for k in kept] == [20, 20] and kept[0]["init"] is None
+    assert kept[1]["init"] == str(keep / "round_0.pt") and kept[1]["rollout_seed"] == 11
+    assert all({"training", "validation"} <= set(k["seconds"]) for k in kept) and "rollouts" in kept[1]["seconds"]
+    for i in (0, 1):
+        ckpt = torch.load(keep / f"round_{i}.pt", weights_only=True)
+        assert all(v.dtype == torch.float16 for v in ckpt["model"].values() if v.is_floating_point())
+    final = summary["final"]
+    assert final["steps"] == 30 and final["from_round"] == summary["chosen"]
+    assert final["demos"] == 2  # the validation cabinets' demonstrations too
     _, rollouts = read_demos(folder / "round_1.hdf5")
     _, val = split_cabinets(make_jobs(small_dataset, ["franka"], "oracle", split="train"), 0.15, 0)
     assert rollouts and all(d.attrs["labels"] == "expert" and d.attrs["cabinet"] not in val for d in rollouts)
+    assert all(d.attrs["seed"] == 11 and d.obs["front_watch"].shape[1] == 11 for d in rollouts)
     for d in rollouts:  # labels are the expert's absolute actions; what was stepped is kept beside them
         assert d.actions.shape == d.extra["actions_executed"].shape and np.isfinite(d.actions).all()
     log = (folder / "round_1.hdf5.episodes.jsonl").read_text()
+    kept_bytes = [(keep / f"round_{i}.pt").read_bytes() for i in (0, 1)]
+    final_time = (folder / "final.pt").stat().st_mtime_ns
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output
     assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log
+    assert (folder / "final.pt").stat().st_mtime_ns == final_time
+    import shutil
+
+    shutil.rmtree(folder)  # a fresh checkout: only the kept rounds
+    fresh = CliRunner().invoke(main, args)
+    assert fresh.exit_code == 0, fresh.output
+    assert [(keep / f"round_{i}.pt").read_bytes() for i in (0, 1)] == kept_bytes
+    def outcomes(text):
+        return sorted((r["key"], r["success"], r["open_ratio"]) for r in map(json.loads, text.splitlines()))
+    assert outcomes((folder / "round_1.hdf5.episodes.jsonl").read_text()) == outcomes(log)
 
 
-def test_warm_started_rounds_start_from_the_previous_policy_and_the_final_round_from_scratch(tmp_path):
+def test_rounds_warm_start_from_the_previous_policy_and_the_final_policy_from_the_best_round(tmp_path):
     from opend_mj.apps.dagger import DaggerConfig
 
-    warm = DaggerConfig(rounds=3, warm_start=True, round_steps=500, final_steps=9000, init=tmp_path / "start.pt")
-    plans = [warm.round_training(r, 3000, tmp_path) for r in range(4)]
-    assert plans == [(3000, tmp_path / "start.pt"), (500, tmp_path / "policy_0.pt"), (500, tmp_path / "policy_1.pt"),
-                     (9000, None)]
-    cold = DaggerConfig(rounds=2)
-    assert [cold.round_training(r, 3000, tmp_path) for r in range(3)] == [(3000, None)] * 3
+    warm = DaggerConfig(rounds=3, round_steps=500, final_steps=9000, init=tmp_path / "start.pt")
+    plans = [warm.round_training(r, 3000, tmp_path / f"round_{r - 1}.pt") for r in range(4)]
+    assert plans == [(3000, tmp_path / "start.pt"), (500, tmp_path / "round_0.pt"), (500, tmp_path / "round_1.pt"),
+                     (500, tmp_path / "round_2.pt")]
+    assert warm.final_training(3000, tmp_path / "round_2.pt") == (9000, tmp_path / "round_2.pt")
+    cold = DaggerConfig(rounds=2, warm_start=False)
+    assert [cold.round_training(r, 3000, tmp_path / "p.pt") for r in range(3)] == [(3000, None)] * 3
+    assert cold.final_training(3000, tmp_path / "p.pt") == (3000, None)
 
 
 def test_best_round_is_the_best_on_validation_and_the_later_on_a_tie():

@@ -14,9 +14,11 @@ validation targets goes into the summary. A rollout ends where the expert has no
 Rollouts are recorded like demonstrations (`opend_mj.apps.planner_demos.record_demos`: the same file,
 keys and log, resumable without losing or repeating an episode); they carry the attribute
 ``labels = "expert"`` (usable for training whether or not the rollout opened its part), ``beta`` and
-the ``policy`` checkpoint. Every round's files live under one folder (``build/dagger/<hand>`` by
-default): ``round_<i>.hdf5`` (rollouts), ``policy_<i>.pt`` (+ ``.json``), ``val_<i>.jsonl`` (the
-validation episodes); a DAgger run that is killed resumes where it stopped.
+the ``policy`` checkpoint. Each round's policy (float16, under 1 MB) and its validation figures are
+kept in a small folder meant for the repository (``checkpoints/bc_rounds/<hand>`` from `opend
+train-policy`), so that the next run extends the same recipe; the rollouts, validation episodes and
+working checkpoints live under ``build/`` and are made again from the kept policies where missing
+(the episodes are deterministic). A run that is killed loses at most the round in flight.
 """
 
 from __future__ import annotations
@@ -50,46 +52,51 @@ class Rollout:
 
 @dataclass(frozen=True)
 class DaggerConfig:
-    """A DAgger run: ``rounds`` after round 0; ``beta0`` and ``beta_decay`` the expert's share of the
-    stepped actions per round; ``val_share`` of the training cabinets (drawn from ``seed``) kept
-    apart for validation (never rolled out, never trained on); ``val_seed``: the episode seed of the
-    validation episodes (other rooms, lights and cameras than the training episodes'); ``limit``: the
-    first K training targets only are rolled out; ``val_limit``: the first K validation targets only
-    are run; ``final_steps``: optimiser steps of the final round's training (its policy is the
-    one shipped where it validates best; it trains on all the data), where the rounds before it, whose policies only roll out,
-    train for the `BCConfig`'s ``steps`` (None: those steps too); ``warm_start``: each round between
-    round 0 and the final one starts from the previous round's weights (`bc_train.train_bc`'s
-    ``init``) instead of from scratch, so that it needs fewer optimiser steps (``round_steps``; None:
+    """A DAgger run: rounds 0 to ``rounds``, then the final policy.
+
+    ``beta0`` and ``beta_decay``: the expert's share of the stepped actions per round;
+    ``val_share`` of the training cabinets (drawn from ``seed``) kept apart for validation (never
+    rolled out, never trained on by a round); ``val_seed``: the episode seed of the validation
+    episodes (other rooms, lights and cameras than the training episodes'); round ``r``'s rollouts
+    run at episode seed ``rollout_seed + r`` (each round other rooms, lights, cameras and
+    percepts); ``limit``: the first K training targets only are rolled out; ``val_limit``: the
+    first K validation targets only are run; ``warm_start``: each round after round 0 starts from
+    the previous round's weights (`bc_train.train_bc`'s ``init``) and trains ``round_steps`` (None:
     the `BCConfig`'s ``steps``); ``init``: round 0 starts from this checkpoint (None: from scratch).
-    See :meth:`round_training`."""
+    The final policy trains on every training cabinet (the validation cabinets' demonstrations
+    too) and every round's rollouts, from the best round's weights (:func:`best_round`) where
+    ``warm_start``, for ``final_steps`` (None: the `BCConfig`'s ``steps``). See
+    :meth:`round_training`."""
 
     rounds: int = 2
     beta0: float = 0.5
     beta_decay: float = 0.5
     val_share: float = 0.15
     val_seed: int = 100
+    rollout_seed: int = 10
     seed: int = 0
     limit: int | None = None  # roll out the first K training targets only (small runs, tests)
     val_limit: int | None = None  # validate on the first K validation targets only
-    final_steps: int | None = None  # optimiser steps of the final round (None: the BCConfig's)
-    warm_start: bool = False  # rounds between round 0 and the final one start from the previous round's policy
-    round_steps: int | None = None  # optimiser steps of the rounds between round 0 and the final one
+    final_steps: int | None = None  # optimiser steps of the final policy (None: the BCConfig's)
+    warm_start: bool = True  # rounds after round 0 (and the final policy) start from a previous policy
+    round_steps: int | None = None  # optimiser steps of the rounds after round 0
     init: Path | None = None  # round 0 starts from this checkpoint (None: from scratch)
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
 
-    def round_training(self, round_: int, steps: int, folder: Path) -> tuple[int, Path | None]:
+    def round_training(self, round_: int, steps: int, previous: Path | None) -> tuple[int, Path | None]:
         """(optimiser steps, checkpoint to start from or None) of round ``round_``'s training, where
-        ``steps`` is the `BCConfig`'s: round 0 from ``init``; a round between it and the final one
-        for ``round_steps``, from the previous round's policy where ``warm_start``; the final round
-        from scratch on all the data for ``final_steps`` (its policy is the one shipped)."""
+        ``steps`` is the `BCConfig`'s and ``previous`` the previous round's policy: round 0 from
+        ``init``; a later round for ``round_steps``, from ``previous`` where ``warm_start``."""
         if round_ == 0:
             return steps, self.init
-        if round_ == self.rounds:
-            return self.final_steps or steps, None
-        previous = Path(folder) / f"policy_{round_ - 1}.pt" if self.warm_start else None
-        return self.round_steps or steps, previous
+        return self.round_steps or steps, previous if self.warm_start else None
+
+    def final_training(self, steps: int, best: Path) -> tuple[int, Path | None]:
+        """(optimiser steps, checkpoint to start from or None) of the final policy, ``best`` the
+        best round's policy."""
+        return self.final_steps or steps, best if self.warm_start else None
 
 
 def rollout_episode(job, env, config) -> tuple[dict, object]:
@@ -101,7 +108,8 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for
     from opend_mj.evaluation.takeover import agent_info
     from opend_mj.policy.expert import PlannerExpert
-    from opend_mj.policy.learned.bc import style_index
+    from opend_mj.policy.agents import agent_image_every, wants_image
+    from opend_mj.policy.learned.bc import WATCH_KEY, style_index
     from opend_mj.policy.planner import Observation
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.envs import SceneReader, instruction_onehot
@@ -144,9 +152,15 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
                     styles.append(style_index(expert.style))
                     sent = label if rng.random() < rollout.beta else np.asarray(action, float)
                     executed.append(sent)
+                    watched = getattr(agent, "last_watch", None)
+                    if watched is not None:
+                        steps.setdefault(WATCH_KEY, []).append(np.array(watched, float))
                     if env.step(sent).last():
                         raise PhysicsDiverged(f"physics instability: {task.physics_warnings}")
                     obs = {**reader.proprio(), "instruction": task.instruction, **camera}
+                    if wants_image(agent, len(labels)):  # the images `opend run` would give the agent
+                        rgb, depth = cam.render()
+                        obs["rgb"], obs["depth"] = rgb, task.sense_depth(rgb, depth)
             except PhysicsDiverged:
                 why = "physics"
             finally:
@@ -179,6 +193,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
         "hinge_seen": percept.hinge or "", "action_noise": "", "labels": "expert", "beta": float(rollout.beta),
         "policy": json.dumps([rollout.policy, [list(a) for a in rollout.policy_args]]), "dagger_round": rollout.round,
         "expert_restarts": int(expert.restarts),
+        "watch_every": int(agent_image_every(agent)) if WATCH_KEY in obs_arrays else 0,
     }
     demo = Demo(actions=np.asarray(labels, float).reshape(n, -1), obs=obs_arrays, attrs=attrs,
                 extra={"actions_executed": np.asarray(executed, float).reshape(n, -1),
@@ -197,17 +212,35 @@ def split_cabinets(jobs, share: float, seed: int) -> tuple[set, set]:
 
 
 def best_round(summary: dict) -> dict:
-    """The round whose policy to ship: the highest validation success, the later round on a tie
-    (it trained on more of the policy's own states)."""
+    """The round whose policy the final policy starts from: the highest validation success, the
+    later round on a tie (it trained on more of the policy's own states)."""
     return max(summary["rounds"], key=lambda r: (r["val_success"], r["round"]))
 
 
+def validation_figures(records) -> dict:
+    """Validation success (%) over ``records`` (`opend run` episodes), overall and per target kind."""
+    out = {"val_episodes": len(records),
+           "val_success": round(100.0 * sum(bool(r.get("success")) for r in records) / max(1, len(records)), 1)}
+    for kind in ("drawer", "door"):
+        mine = [r for r in records if r.get("target_type") == kind]
+        out[f"val_{kind}"] = round(100.0 * sum(bool(r.get("success")) for r in mine) / max(1, len(mine)), 1)
+        out[f"val_{kind}_episodes"] = len(mine)
+    return out
+
+
 def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_config, config: DaggerConfig = DaggerConfig(),
-               workers: int = 1, threads: int = 1, progress: bool = True, log=print, solver: str = "fasterrcnn") -> dict:
+               workers: int = 1, threads: int = 1, progress: bool = True, log=print, solver: str = "fasterrcnn",
+               keep: Path | None = None) -> dict:
     """DAgger from ``demo_files`` (the planner's demonstrations of ``hand``) on the training split of
-    ``cabinets_dir``; every round's files under ``folder``. Returns the summary (also written to
-    ``folder/dagger.json``): per round, the data it trained on and its validation success, and
-    ``chosen``, the round whose policy to ship (:func:`best_round`)."""
+    ``cabinets_dir``, then the final policy (``folder/final.pt``).
+
+    ``keep`` (default: ``folder``): where each round's policy (``round_<i>.pt``, float16 weights) and
+    its figures (``round_<i>.json``: validation success overall and per kind, data sizes, wall
+    seconds per stage) are kept: a small folder meant for the repository, so that a later run
+    continues from the last round kept instead of starting over. ``folder`` holds what can be
+    made again: the rollouts (``round_<i>.hdf5``; missing ones are recorded again, deterministically,
+    from the kept policies), the validation episodes and the final policy. A killed run loses at
+    most the round in flight. Returns the summary (also ``folder/dagger.json``)."""
     from dataclasses import replace
 
     from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, record_demos
@@ -217,52 +250,112 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     from opend_mj.policy.learned.bc_train import train_bc
 
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    keep = Path(keep) if keep is not None else folder
+    for f in (folder, keep):
+        f.mkdir(parents=True, exist_ok=True)
     train_jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.seed)
     train_cabs, val_cabs = split_cabinets(train_jobs, config.val_share, config.seed)
-    rollout_jobs = [j for j in train_jobs if j.cabinet in train_cabs][:config.limit]
     val_jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.val_seed,
                          cabinet_ids=sorted(val_cabs))[:config.val_limit]
-    demos = [d for d in load_training_demos(list(demo_files), hand=hand) if d.attrs.get("cabinet") not in val_cabs]
-    summary = {"hand": hand, "demo_files": [str(p) for p in demo_files],
+    all_demos = load_training_demos(list(demo_files), hand=hand)
+    demos = [d for d in all_demos if d.attrs.get("cabinet") not in val_cabs]
+    summary = {"hand": hand, "demo_files": [str(p) for p in demo_files], "kept": str(keep),
                "config": {k: (str(v) if isinstance(v, Path) else v) for k, v in config.__dict__.items()},
                "validation": {"cabinets": len(val_cabs), "targets": len(val_jobs), "seed": config.val_seed},
                "rounds": []}
     data_files: list[Path] = []
+
+    def timed(stage: str, seconds: dict, fn):
+        t0 = time.perf_counter()
+        out = fn()
+        seconds[stage] = round(time.perf_counter() - t0, 1)
+        log(f"  {stage}: {seconds[stage]:.0f} s")
+        return out
+
     for round_ in range(config.rounds + 1):
-        ckpt = folder / f"policy_{round_}.pt"
+        ckpt, figures = keep / f"round_{round_}.pt", keep / f"round_{round_}.json"
+        seconds: dict = {}
         if round_ > 0:
-            previous = folder / f"policy_{round_ - 1}.pt"
+            previous = keep / f"round_{round_ - 1}.pt"
             rollout = Rollout(policy="bc", policy_args=(("checkpoint", str(previous)), ("solver", solver)),
                               beta=config.beta(round_), round=round_)
+            jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.rollout_seed + round_,
+                             cabinet_ids=sorted(train_cabs))[:config.limit]
             data = folder / f"round_{round_}.hdf5"
-            log(f"round {round_}: rollouts of {previous.name} on {len(rollout_jobs)} targets, beta {rollout.beta:g}")
-            record_demos(rollout_jobs, data, workers=workers, config=RecordConfig(keep_failures=True, rollout=rollout),
-                         progress=progress)
+            log(f"round {round_}: rollouts of {previous.name} on {len(jobs)} targets (episode seed "
+                f"{config.rollout_seed + round_}), beta {rollout.beta:g}")
+            timed("rollouts", seconds, lambda: record_demos(
+                jobs, data, workers=workers, config=RecordConfig(keep_failures=True, rollout=rollout),
+                progress=progress))
             data_files.append(data)
-        labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
-        if not ckpt.is_file():
-            log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts")
-            steps, init = config.round_training(round_, bc_config.steps, folder)
-            trained = train_bc(demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=ckpt,
-                               progress=progress, threads=threads, init=init)
+        if ckpt.is_file() and figures.is_file():
+            entry = json.loads(figures.read_text())
+            log(f"round {round_}: kept ({ckpt}): validation {entry['val_success']} %")
         else:
-            trained = json.loads(ckpt.with_suffix(".json").read_text())
-        val_out = folder / f"val_{round_}.jsonl"
-        jobs = [replace(j, policy="bc", policy_args=(("checkpoint", str(ckpt)), ("solver", solver)),
-                        solver=f"bc-{solver}")
-                for j in val_jobs]
-        run_jobs(jobs, val_out, workers=workers, progress=progress)
-        recs = [r for r in load_results(val_out)]
-        opened = sum(bool(r.get("success")) for r in recs)
-        entry = {"round": round_, "checkpoint": str(ckpt), "demos": len(demos), "rollouts": len(labelled),
-                 "samples": trained.get("samples"), "beta": config.beta(round_) if round_ else None,
-                 "val_success": round(100.0 * opened / max(1, len(recs)), 1), "val_episodes": len(recs)}
-        summary["rounds"].append(entry)
+            labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
+            steps, init = config.round_training(round_, bc_config.steps, keep / f"round_{round_ - 1}.pt")
+            log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts "
+                f"({steps} steps{', from ' + str(init) if init else ''})")
+            work = folder / f"policy_{round_}.pt"
+            trained = timed("training", seconds, lambda: train_bc(
+                demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=work,
+                progress=progress, threads=threads, init=init))
+            save_half(work, ckpt)  # the policy kept, validated and rolled out: float16 weights
+            val_out = folder / f"val_{round_}.jsonl"
+            val_out.unlink(missing_ok=True)  # episodes of a policy trained before this one
+            jobs = [replace(j, policy="bc", policy_args=(("checkpoint", str(ckpt)), ("solver", solver)),
+                            solver=f"bc-{solver}") for j in val_jobs]
+            timed("validation", seconds, lambda: run_jobs(jobs, val_out, workers=workers, progress=progress))
+            entry = {"round": round_, "demos": len(demos), "rollouts": len(labelled),
+                     "samples": trained.get("samples"), "steps": steps, "init": str(init) if init else None,
+                     "beta": config.beta(round_) if round_ else None,
+                     "rollout_seed": config.rollout_seed + round_ if round_ else None,
+                     **validation_figures(list(load_results(val_out))), "seconds": seconds}
+            figures.write_text(json.dumps(entry, indent=1) + "\n")
+            log(f"round {round_}: validation {entry['val_success']} % (drawers {entry['val_drawer']} %, doors "
+                f"{entry['val_door']} %) -> {ckpt}")
+        summary["rounds"].append({**entry, "checkpoint": str(ckpt)})
         summary["chosen"] = best_round(summary)["round"]
-        log(f"round {round_}: validation {opened}/{len(recs)} opened ({entry['val_success']} %)")
         (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
+    final = folder / "final.pt"
+    best = keep / f"round_{summary['chosen']}.pt"
+    labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
+    steps, init = config.final_training(bc_config.steps, best)
+    plan = {"from_round": summary["chosen"], "rounds": config.rounds, "steps": steps, "demos": len(all_demos),
+            "rollouts": len(labelled), "warm_start": init is not None}
+    done = folder / "final.plan.json"
+    if final.is_file() and done.is_file() and json.loads(done.read_text()) == plan:
+        log(f"final: {final} already trained for these rounds")
+        summary["final"] = {"checkpoint": str(final), **plan}
+    else:
+        log(f"final: training on {len(all_demos)} demonstrations (every training cabinet) and {len(labelled)} "
+            f"labelled rollouts ({steps} steps{', from ' + str(init) if init else ''})")
+        seconds = {}
+        timed("training", seconds, lambda: train_bc(
+            all_demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=final,
+            progress=progress, threads=threads, init=init))
+        done.write_text(json.dumps(plan) + "\n")
+        summary["final"] = {"checkpoint": str(final), **plan, "seconds": seconds}
+    (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary
 
 
-__all__ = ["DaggerConfig", "Rollout", "best_round", "rollout_episode", "run_dagger", "split_cabinets"]
+def save_half(src: Path, dst: Path) -> None:
+    """Copy the checkpoint ``src`` of `bc_train.train_bc` to ``dst`` with its weights as float16
+    (half the bytes; the policy loads them as float32), and its ``.json`` summary beside it as
+    ``<dst>.train.json``."""
+    import shutil
+
+    import torch
+
+    ckpt = torch.load(src, map_location="cpu", weights_only=True)
+    ckpt["model"] = {k: (v.half() if v.is_floating_point() else v) for k, v in ckpt["model"].items()}
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dst.with_suffix(".tmp")
+    torch.save(ckpt, tmp)
+    tmp.replace(dst)
+    shutil.copyfile(src.with_suffix(".json"), dst.with_suffix(".train.json"))
+
+
+__all__ = ["DaggerConfig", "Rollout", "best_round", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
+           "validation_figures"]

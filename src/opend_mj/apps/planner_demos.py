@@ -30,7 +30,7 @@ import math
 import time
 import zlib
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -38,10 +38,12 @@ import numpy as np
 from opend_mj.apps.demos import Demo, _episode_json, append_demos, env_args, read_demos
 from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.jobs import group_jobs
+from opend_mj.policy.perception.watch import WatchConfig
 
 #: Per-step observation keys of a planner demonstration (besides optional ``rgb`` / ``depth``).
 DEMO_OBS_KEYS = ("hand_qpos", "hand_qvel", "root_pos", "root_quat", "root_vel", "grasp_site_pos", "grasp_site_quat",
-                 "mocap_pos", "mocap_quat", "touch", "time", "instruction", "handle_box", "handle_features")
+                 "mocap_pos", "mocap_quat", "touch", "time", "instruction", "handle_box", "handle_features",
+                 "front_watch")
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,8 @@ class RecordConfig:
     noise: ActionNoise = ActionNoise()
     #: a DAgger round: a policy acts and the planner as an expert labels (`opend_mj.apps.dagger`)
     rollout: object | None = None
+    #: how the front is watched while acting (`perception.watch`): stored per step as ``front_watch``
+    watch: WatchConfig = field(default_factory=WatchConfig)
 
     def __post_init__(self):
         if self.image_size and self.image_size < 16:
@@ -135,9 +139,14 @@ def _rotvec(q) -> np.ndarray:
 class _RecordingEnv:
     """The scene as the planner steps it, storing the agent's observation and the action of each step."""
 
-    def __init__(self, env, reader, adapter, camera=None, noise: NoiseProcess | None = None):
+    def __init__(self, env, reader, adapter, camera=None, noise: NoiseProcess | None = None, watcher=None,
+                 look=None):
         self._env, self._reader, self._adapter, self._camera = env, reader, adapter, camera
         self._noise = noise
+        #: the front watched as a learner watches it (`perception.watch`): a look every
+        #: ``watcher.config.every`` steps through ``look`` (a depth image of the front camera)
+        self._watcher, self._look = watcher, look
+        self._n = 0  # control steps taken
         self.style = -1  # the planner's current grasp style (`bc.style_index`), set as each approach starts
         self.styles: list[int] = []  # one per step
         self.obs: dict[str, list] = {}
@@ -155,6 +164,12 @@ class _RecordingEnv:
         obs = self._reader.proprio()
         for k, v in obs.items():
             self.obs.setdefault(k, []).append(np.array(v, float))
+        if self._watcher is not None:
+            site, now = obs["grasp_site_pos"], float(obs["time"][0])
+            if self._watcher.config.looks_at(self._n):
+                self._watcher.look(self._look(), site, now)
+            self.obs.setdefault("front_watch", []).append(self._watcher.vector(site, now).astype(float))
+        self._n += 1
         if self._camera is not None:
             rgb, depth = self._camera.render()
             self.obs.setdefault("rgb", []).append(rgb)
@@ -181,6 +196,7 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
     from opend_mj.policy.factory import build_planner
     from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle, style_index
+    from opend_mj.policy.perception import WATCH_DIM, FrontWatcher
     from opend_mj.policy.planner import Observation, Robot
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.envs import ActionAdapter, SceneReader, instruction_onehot
@@ -208,7 +224,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
             adapter = ActionAdapter(job.hand, task.config)
             noise = NoiseProcess(config.noise, adapter.finger_low, adapter.finger_high, task.control_timestep,
                                  noise_seed(job)) if config.noise.active else None
-            rec = _RecordingEnv(env, reader, adapter, extra_cam, noise)
+            watcher = FrontWatcher.from_percept(depth, view, percept, config.watch) if percept is not None else None
+            rec = _RecordingEnv(env, reader, adapter, extra_cam, noise, watcher, look=lambda: cam.render()[1])
             robot = Robot(rec, look=lambda: cam.render()[1])
             diverged = None
             try:
@@ -230,6 +247,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     obs["instruction"] = np.repeat(instruction_onehot(task.instruction)[None].astype(np.float64), n, axis=0)
     obs["handle_box"] = np.repeat(box[None], n, axis=0)
     obs["handle_features"] = np.repeat(feats[None], n, axis=0)
+    if "front_watch" not in obs:  # no handle located: nothing watched
+        obs["front_watch"] = np.full((n, WATCH_DIM), np.nan)
     key = list(job.key())
     attrs = {
         "instruction": str(task.instruction), "cabinet": job.cabinet, "cabinet_dir": str(Path(job.cabinet_dir).resolve()),
@@ -242,6 +261,7 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
         "handle_orientation": percept.handle.orientation if percept is not None else "",
         "hinge_seen": (percept.hinge or "") if percept is not None else "",
         "action_noise": json.dumps(dataclasses.asdict(config.noise)) if config.noise.active else "",
+        "watch_every": int(config.watch.every) if percept is not None else 0,
     }
     extra = {"actions_delta": np.asarray(rec.deltas, float).reshape(n, -1),
              "grasp_style": np.asarray(rec.styles, np.int8).reshape(n)}
@@ -379,9 +399,11 @@ def record_demos(jobs: list[EpisodeJob], out: Path, workers: int = 1, config: Re
     return counts
 
 
-#: The observation keys behaviour cloning reads (`policy.learned.bc`).
+#: The observation keys behaviour cloning reads (`policy.learned.bc`), and the watched front
+#: (`perception.watch`), read where a file has it (a policy that watches needs it: `bc_train`).
 TRAINING_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch",
                  "time", "handle_features")
+WATCH_KEY = "front_watch"
 
 
 def load_training_demos(paths, max_demos: int | None = None, successes_only: bool = True,
@@ -427,6 +449,8 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
                     if missing:
                         raise DemoFileError(f"{path}: {name} has no obs/{missing[0]} (not recorded by `opend demos`)")
                     obs = {k: d["obs"][k][()].astype(np.float32) for k in TRAINING_KEYS}
+                    if WATCH_KEY in d["obs"]:  # recorded by `opend demos` since the front is watched
+                        obs[WATCH_KEY] = d["obs"][WATCH_KEY][()].astype(np.float32)
                     extra = {"grasp_style": d["grasp_style"][()]} if "grasp_style" in d else {}
                     out.append(Demo(actions=d["actions"][()], obs=obs, attrs=attrs, extra=extra))
                     if max_demos is not None and len(out) >= max_demos:

@@ -81,6 +81,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--grasp-token/--no-grasp-token", default=False, show_default=True,
               help="The grasp-style token: a head predicts the expert's grasp style at each step and the actions "
                    "are conditioned on it (needs demos that recorded grasp_style).")
+@click.option("--watch", type=click.IntRange(min=0), default=12, show_default=True,
+              help="Control steps between the depth images in which the policy watches the front it opens "
+                   "(needs demos recorded with `front_watch`); 0: blind after the first image.")
 @click.option("--kind", type=click.Choice(TARGET_KINDS), default=None,
               help="Train on the demos of this kind of target only (a member that a bundle routes that kind "
                    "to: `opend bundle-policy --route`) [both].")
@@ -88,9 +91,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--init", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Start from this checkpoint's weights (a warm start; its architecture wins) instead of "
                    "from scratch.")
-@click.option("--warm-start/--no-warm-start", default=False, show_default=True,
-              help="DAgger: each round between round 0 and the final one starts from the previous round's "
-                   "policy instead of from scratch (the final round trains from scratch on all the data).")
+@click.option("--warm-start/--no-warm-start", default=True, show_default=True,
+              help="DAgger: each round after round 0 starts from the previous round's policy, and the final "
+                   "policy from the best round's, instead of from scratch.")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, help="torch CPU threads.")
 @click.option("--device", default="cpu", show_default=True)
 @click.option("--dagger", "dagger_rounds", type=click.IntRange(min=0), default=None,
@@ -99,7 +102,11 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, help="DAgger: the cabinets whose training split is rolled out.")
 @click.option("--dagger-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="DAgger: every round's rollouts, checkpoints and validation episodes [build/dagger/<hand>].")
+              help="DAgger: what can be made again: rollouts, validation episodes, working checkpoints "
+                   "[build/dagger/<hand>].")
+@click.option("--keep-rounds", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="DAgger: each round's policy (float16) and validation figures, kept so that a later run "
+                   "continues from the last round kept [checkpoints/bc_rounds/<hand>].")
 @click.option("--beta0", type=click.FloatRange(0, 1), default=0.5, show_default=True,
               help="DAgger: the share of steps at which the expert's action is stepped in round 1.")
 @click.option("--beta-decay", type=click.FloatRange(0, 1), default=0.5, show_default=True,
@@ -107,17 +114,18 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--dagger-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: roll out the first K training targets only [all].")
 @click.option("--final-steps", type=click.IntRange(min=1), default=None,
-              help="DAgger: optimiser steps of the final round, trained on all the data [--steps].")
+              help="DAgger: optimiser steps of the final policy, trained on every training cabinet [--steps].")
 @click.option("--round-steps", type=click.IntRange(min=1), default=None,
-              help="DAgger: optimiser steps of the rounds between round 0 and the final one [--steps].")
+              help="DAgger: optimiser steps of the rounds after round 0 [--steps].")
 @click.option("--val-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: validate on the first K validation targets only [all].")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="DAgger: worker processes for the rollouts and the validation episodes.")
 @click.option("--progress/--no-progress", default=True)
-def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, kind, seed, init,
-                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, beta0, beta_decay, dagger_targets,
-                 final_steps, round_steps, val_targets, workers, progress):
+def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, watch, kind, seed,
+                 init,
+                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, keep_rounds, beta0, beta_decay,
+                 dagger_targets, final_steps, round_steps, val_targets, workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
 
@@ -125,8 +133,8 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     from opend_mj.policy.learned.bc import BCConfig
     from opend_mj.policy.learned.bc_train import train_bc
 
-    changes = {k: v for k, v in dict(steps=steps, batch_size=batch_size, lr=lr, chunk=chunk, d_model=d_model).items()
-               if v is not None}
+    changes = {k: v for k, v in dict(steps=steps, batch_size=batch_size, lr=lr, chunk=chunk, d_model=d_model,
+                                     watch=watch).items() if v is not None}
     if grasp_token:
         from opend_mj.policy.learned.bc import GRASP_STYLES
 
@@ -139,7 +147,8 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
                               limit=dagger_targets, val_limit=val_targets, final_steps=final_steps,
                               warm_start=warm_start, init=init, round_steps=round_steps)
-        _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, workers, threads, progress)
+        _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, keep_rounds, workers,
+                           threads, progress)
         return
     try:
         demos_list = load_training_demos(list(demo_files), max_demos=max_demos, kind=kind, hand=hand)
@@ -152,29 +161,30 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
                f"{summary['parameters']} parameters, {summary['seconds']:.0f} s; last {last} -> {out}")
 
 
-def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, folder, workers, threads, progress) -> None:
-    """`opend train-policy --dagger`: the DAgger rounds, then the checkpoint of the round with the best
-    validation success (the summary's ``chosen``, `apps.dagger.best_round`) copied to ``out``."""
+def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, folder, keep, workers, threads,
+                       progress) -> None:
+    """`opend train-policy --dagger`: the DAgger rounds (each kept in ``keep``), then the final policy
+    (every training cabinet, from the best round) written to ``out`` with float16 weights."""
     import json
-    import shutil
 
-    from opend_mj.apps.dagger import run_dagger
+    from opend_mj.apps.dagger import run_dagger, save_half
     from opend_mj.apps.demos import DemoFileError
 
     folder = folder or Path("build/dagger") / hand
+    keep = keep or Path("checkpoints/bc_rounds") / hand
     try:
         summary = run_dagger(list(demo_files), hand, cabinets_dir, folder, config, dagger, workers=workers,
-                             threads=threads, progress=progress, log=click.echo)
+                             threads=threads, progress=progress, log=click.echo, keep=keep)
     except (ValueError, FileNotFoundError, DemoFileError) as exc:
         raise click.ClickException(str(exc)) from exc
-    best = Path(summary["rounds"][summary["chosen"]]["checkpoint"])
-    out.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(best, out)
-    trained = json.loads(best.with_suffix(".json").read_text())
+    final = Path(summary["final"]["checkpoint"])
+    save_half(final, out)
+    trained = json.loads(final.with_suffix(".json").read_text())
+    out.with_suffix(".train.json").unlink(missing_ok=True)
     out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
                                                            for r in summary["rounds"])
-               + f"; round {summary['chosen']}'s policy -> {out}")
+               + f"; final policy (from round {summary['chosen']}, every training cabinet) -> {out}")
 
 
 @click.command("bundle-policy")

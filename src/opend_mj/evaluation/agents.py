@@ -32,7 +32,7 @@ from opend_mj.evaluation.runner import (
     instruction_for,
     run_episode_group,
 )
-from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, agent_name
+from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, agent_name, wants_image
 
 #: The protocol's time limit for an agent (s of simulated time): TaskConfig's default episode length.
 PROTOCOL_TIME_LIMIT = 15.0
@@ -144,7 +144,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     env.reset()
     physics = env.physics
     reader = SceneReader(env, config.image_size)
-    control, images = agent_control(agent), agent_images(agent)
+    control = agent_control(agent)
     adapter = ActionAdapter(job.hand, config)
     if control == "delta":
         low, high = -np.ones(adapter.delta_dim), np.ones(adapter.delta_dim)
@@ -199,7 +199,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
             if ts.last():  # the scene's time limit is far away: a physics instability ended it
                 diverged = True
                 break
-            obs = observe(images == "every_step")
+            obs = observe(wants_image(agent, steps))
     finally:
         reader.close()
         if video:

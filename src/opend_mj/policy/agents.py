@@ -6,6 +6,7 @@ The interface `opend run --policy module:Class` evaluates (see the README's "Eva
         name = "my-agent"          # the results' `solver` column (default: the class name)
         control = "absolute"       # or "delta": the gymnasium environment's normalised action
         images = "first"           # or "every_step": RGB-D on every observation, not only the first
+        image_every = 1            # with "every_step": on every image_every-th step only (read after reset)
 
         def reset(self, episode: EpisodeInfo) -> None: ...
         def act(self, obs: dict) -> np.ndarray | None: ...   # None: done, score the state as it is
@@ -86,6 +87,20 @@ def agent_images(agent) -> str:
     if images not in AGENT_IMAGES:
         raise ValueError(f"agent {agent_name(agent)}: images must be one of {AGENT_IMAGES}, not {images!r}")
     return images
+
+
+def agent_image_every(agent) -> int:
+    """Control steps between the images of an ``images = "every_step"`` agent (its ``image_every``,
+    default 1; read after each reset, so that an agent may set it from what it loaded)."""
+    every = getattr(agent, "image_every", 1)
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise ValueError(f"agent {agent_name(agent)}: image_every must be an integer >= 1, not {every!r}")
+    return int(every)
+
+
+def wants_image(agent, step: int) -> bool:
+    """Whether control step ``step`` (0: the first observation, which always has one) brings the agent RGB-D."""
+    return step == 0 or (agent_images(agent) == "every_step" and step % agent_image_every(agent) == 0)
 
 
 # --------------------------------------------------------------------------------------------------

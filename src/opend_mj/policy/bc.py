@@ -3,7 +3,9 @@
 On the first step a shipped handle solver (``fasterrcnn`` by default, or ``cliport``) finds the
 instructed handle in the RGB-D image, and the planner's perception back-projects it
 (`policy.learned.bc.perceive_handle`); from then on, every control step, the transformer reads that
-handle, the instruction and the hand's own state (`policy.learned.bc`) and predicts the next
+handle, the instruction, the hand's own state and, for a checkpoint that watches (``watch``), the
+instructed front as the latest depth image shows it (`policy.perception.watch`: a new image every
+``watch`` control steps, ``image_every``) (`policy.learned.bc`) and predicts the next
 ``chunk`` actions; the action sent blends every prediction made for this step, oldest weighted most
 (ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). Several
 checkpoints (``checkpoint=a.pt,b.pt,c.pt``, or one bundle file of `opend bundle-policy`) form a seed
@@ -25,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import (checkpoint_paths, context_features, decode_action, load_policies, step_actions,
-                                        step_features)
+from opend_mj.policy.learned.bc import (STEP_KEYS, WATCH_KEY, checkpoint_paths, context_features, decode_action,
+                                        load_policies, step_actions, step_features)
+from opend_mj.policy.perception.watch import FrontWatcher, WatchConfig
 
 
 def default_checkpoint(hand: str) -> Path:
@@ -53,7 +56,8 @@ class BCAgent:
     defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
 
     control = "absolute"
-    images = "first"
+    #: RGB-D every ``image_every`` steps: the front watched (set at reset from the checkpoint's ``watch``)
+    images = "every_step"
 
     def __init__(self, checkpoint: str | None = None, solver: str = "fasterrcnn", threads: int = 1,
                  name: str | None = None, stop_time: float | None = None, ensemble_decay: float | None = None,
@@ -70,6 +74,9 @@ class BCAgent:
         self.ensemble_decay = ensemble_decay
         self.name = name or f"bc-{solver}"
         self._episode = None
+        self.image_every = WatchConfig().every
+        self.watcher = None
+        self.last_watch = None  # the watched front's numbers of the latest step (`perception.watch`)
 
     @property
     def solver(self):
@@ -104,6 +111,11 @@ class BCAgent:
         self._max_time = float(self.stop_time if self.stop_time is not None else default)
         self._decay = float(self.ensemble_decay if self.ensemble_decay is not None
                             else np.mean([c.ensemble_decay for _, c, _ in members]))
+        self._watch = WatchConfig(every=self.config.watch) if self.config.watch else None
+        # a blind checkpoint gets the images it ignores at the default rate, as one that watches
+        self.image_every = self._watch.every if self._watch else WatchConfig().every
+        self.watcher = None
+        self.last_watch = None
         self._episode = episode
         self._ctx = None  # one context per member
         self._centre = None
@@ -129,12 +141,19 @@ class BCAgent:
             self._centre = vec[:3]
             self._ctx = [torch.from_numpy(context_features(vec[:n], obs["instruction"]))[None]
                          for n in self._percept_dims]
+            if self._watch is not None:
+                self.watcher = FrontWatcher.from_percept(obs["depth"], self._episode.camera_view, self.percept,
+                                                         self._watch)
+        elif self.watcher is not None and obs.get("depth") is not None:
+            self.watcher.look(obs["depth"], obs["grasp_site_pos"], float(obs["time"][0]))
         if float(obs["time"][0]) >= self._max_time:
             self.stopped = "done"
             return None
-        one = {k: np.asarray(obs[k], float)[None] for k in ("grasp_site_pos", "grasp_site_quat", "mocap_pos",
-                                                            "mocap_quat", "root_vel", "hand_qpos", "touch", "time")}
-        self._steps.append(step_features(one, self._centre)[0])
+        one = {k: np.asarray(obs[k], float)[None] for k in STEP_KEYS}
+        if self.watcher is not None:
+            self.last_watch = self.watcher.vector(obs["grasp_site_pos"], float(obs["time"][0]))
+            one[WATCH_KEY] = self.last_watch[None]
+        self._steps.append(step_features(one, self._centre, watch=self.watcher is not None)[0])
         t = len(self._steps) - 1
         rows = [max(t - lag, 0) for lag in self.config.lags]
         steps = torch.from_numpy(np.stack([self._steps[r] for r in rows]))[None]

@@ -14,7 +14,10 @@ Inputs (only what the evaluation protocol gives an agent; never ground truth):
 * **steps** (:func:`step_features`): the hand's own state at the current step and at earlier steps
   (``lags``): grasp site and commanded root (mocap) positions relative to the perceived handle centre
   (m), their orientations as the first two columns of the rotation matrix (6 numbers each, continuous
-  where a quaternion flips sign), the root's velocity, the finger joints, touch (N) and the time (s).
+  where a quaternion flips sign), the root's velocity, the finger joints, touch (N) and the time (s);
+  for a policy that watches (``BCConfig.watch``), the instructed front as the latest depth image shows
+  it (`opend_mj.policy.perception.watch`: its shift and turn, where the handle is now, the grasp site
+  relative to it; a new image every ``watch`` control steps).
 
 Output: a chunk of ``chunk`` future actions (:func:`encode_actions`), each the root target position
 relative to the perceived handle centre (m), the root target orientation (6 numbers) and the finger
@@ -75,6 +78,10 @@ class BCConfig:
     #: (the true style in training, the predicted one when acting)
     modes: int = 0
     mode_weight: float = 0.1  # the style's cross-entropy beside the actions' L1 in the loss
+    #: control steps between the depth images the policy watches its front in
+    #: (`perception.watch.FrontWatcher`, a step token's last ``WATCH_DIM`` numbers); 0: blind after
+    #: the first image (checkpoints from before the watch)
+    watch: int = 0
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -201,12 +208,18 @@ def quat_from_rot6(v: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
-def step_features(obs: dict, centre) -> np.ndarray:
-    """(T, S) features of T observations (each key (T, ...)) relative to the handle ``centre``."""
+#: The per-step observation key of the watched front (`perception.watch.FrontWatcher.vector`).
+WATCH_KEY = "front_watch"
+
+
+def step_features(obs: dict, centre, watch: bool = False) -> np.ndarray:
+    """(T, S) features of T observations (each key (T, ...)) relative to the handle ``centre``; with
+    ``watch``, the watched front's numbers (``obs["front_watch"]``, (T, WATCH_DIM)) after them."""
     c = np.asarray(centre, float)
     parts = [np.asarray(obs["grasp_site_pos"], float) - c, rot6(obs["grasp_site_quat"]),
              np.asarray(obs["mocap_pos"], float) - c, rot6(obs["mocap_quat"])]
-    parts += [np.asarray(obs[k], float).reshape(len(parts[0]), -1) for k in ("root_vel", "hand_qpos", "touch", "time")]
+    keys = ("root_vel", "hand_qpos", "touch", "time") + ((WATCH_KEY,) if watch else ())
+    parts += [np.asarray(obs[k], float).reshape(len(parts[0]), -1) for k in keys]
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
@@ -305,7 +318,7 @@ ENSEMBLE_FORMAT = "opend-bc-ensemble"
 #: inputs (the context may differ in length: checkpoints of before the hinge line read fewer percept numbers).
 _MEMBER_KEYS = ("hand", "finger_low", "finger_high")
 _MEMBER_DIMS = ("step", "act")
-_MEMBER_CONFIG = ("chunk", "lags")
+_MEMBER_CONFIG = ("chunk", "lags", "watch")
 
 
 #: One step's actions of each model (:func:`step_actions`): ``id(model) -> (model, traced forward)``,
@@ -464,6 +477,6 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     return summary
 
 
-__all__ = ["BCConfig", "step_actions", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "build_model", "context_features",
+__all__ = ["BCConfig", "step_actions", "ENSEMBLE_FORMAT", "bundle_policies", "checkpoint_paths", "load_policies", "HandlePercept", "PERCEPT_DIM", "STEP_KEYS", "WATCH_KEY", "build_model", "context_features",
            "decode_action", "encode_actions", "hinge_line", "lag_index", "load_policy", "perceive_handle",
            "percept_vector", "quat_from_rot6", "rot6", "step_features"]

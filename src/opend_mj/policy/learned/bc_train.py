@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj.policy.learned.bc import (
+    WATCH_KEY,
     BCConfig,
     build_model,
     context_features,
@@ -60,9 +61,11 @@ def usable(demo) -> bool:
     return wanted and len(demo.actions) > 0 and bool(np.isfinite(feats[0]).all())
 
 
-def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:
+def demo_arrays(demos, finger_low, finger_high, watch: int = 0) -> DemoArrays:
     """The samples of the usable demos (see :func:`usable`); ``modes`` where every one recorded its
-    grasp styles (``grasp_style``, `opend demos`)."""
+    grasp styles (``grasp_style``, `opend demos`); with ``watch`` (control steps between looks),
+    each step's watched front (``front_watch``) among its features, which every usable demo must
+    have recorded at that rate (its ``watch_every`` attribute)."""
     ctx, steps, acts, lengths, cabinets, max_time, modes = [], [], [], [], [], 0.0, []
     for d in demos:
         if not usable(d):
@@ -72,7 +75,12 @@ def demo_arrays(demos, finger_low, finger_high) -> DemoArrays:
         feats = np.asarray(d.obs["handle_features"][0], float)
         centre = feats[:3]
         ctx.append(context_features(feats, d.attrs["instruction"]))
-        steps.append(step_features(d.obs, centre))
+        if watch and (WATCH_KEY not in d.obs or int(d.attrs.get("watch_every", 0)) != watch):
+            raise ValueError(f"demonstration {d.attrs.get('cabinet')}/{d.attrs.get('target_joint')} recorded no "
+                             f"{WATCH_KEY} every {watch} steps (the watched front; it has "
+                             f"{d.attrs.get('watch_every', 'none')}): record it again with this opend-mj's "
+                             "`opend demos`, or train with its rate (--watch)")
+        steps.append(step_features(d.obs, centre, watch=bool(watch)))
         acts.append(encode_actions(d.actions, centre, finger_low, finger_high))
         lengths.append(len(d.actions))
         cabinets.append(str(d.attrs.get("cabinet", "")))
@@ -132,7 +140,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
     torch.manual_seed(config.seed)
     adapter = ActionAdapter(hand, TaskConfig())
     t0 = time.perf_counter()
-    data = demo_arrays(demos, adapter.finger_low, adapter.finger_high)
+    data = demo_arrays(demos, adapter.finger_low, adapter.finger_high, watch=config.watch)
     if config.modes and data.modes is None:
         raise ValueError("the grasp-style token needs demonstrations that recorded their grasp styles "
                          "(grasp_style): record them again with this opend-mj's `opend demos`")
@@ -225,7 +233,7 @@ def train_bc(demos, hand: str, config: BCConfig = BCConfig(), out: Path | None =
 
 
 #: BCConfig fields that shape the model: a warm start takes them from the checkpoint it starts from.
-ARCHITECTURE_FIELDS = ("chunk", "lags", "d_model", "heads", "enc_layers", "dec_layers", "dropout", "modes")
+ARCHITECTURE_FIELDS = ("chunk", "lags", "d_model", "heads", "enc_layers", "dec_layers", "dropout", "modes", "watch")
 
 
 def _warm_start(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> tuple[BCConfig, dict]:

@@ -6,6 +6,7 @@
 * :mod:`.door`: where a door's front plane ends, and which side a single door hinges on.
 * :mod:`.proposals`: handle candidates over the whole image (for learned solvers).
 * :mod:`.front`: how a pulled front moved between two images (slid out level, or turned).
+* :mod:`.watch`: the front watched while acting: its motion and the handle's place, per look.
 * :mod:`.config`: :class:`PerceptionConfig`, the thresholds the planner's perception uses.
 """
 
@@ -27,10 +28,11 @@ from opend_mj.policy.perception.proposals import (
     handle_proposals,
     thin_proposals,
 )
+from opend_mj.policy.perception.watch import WATCH_DIM, WATCH_NAMES, FrontWatcher, WatchConfig, blind_vector
 
 __all__ = [
-    "FrontMotionConfig", "HandleEstimate", "HandleShape", "PerceptionConfig", "ProposalConfig",
+    "FrontMotionConfig", "FrontWatcher", "HandleEstimate", "HandleShape", "PerceptionConfig", "ProposalConfig",
     "ThinProposalConfig", "door_edges", "door_edges_vertical", "estimate_handle", "front_motion",
     "handle_proposals", "infer_hinge_side", "measure_handle", "one_of_paired_handles", "refine_box_with_depth",
-    "snaps_to_depth", "thin_proposals",
+    "snaps_to_depth", "thin_proposals", "WATCH_DIM", "WATCH_NAMES", "WatchConfig", "blind_vector",
 ]
