@@ -83,7 +83,14 @@ def one_line_error(exc: BaseException) -> str:
 @click.version_option(version=__version__, package_name="opend-mj")
 @click.option("--debug", is_flag=True, help="Show the traceback of an unexpected error (also: OPEND_DEBUG=1).")
 def main(debug: bool) -> None:
-    """opend-mj: language-driven door and drawer opening on MuJoCo."""
+    """opend-mj: language-driven door and drawer opening on MuJoCo.
+
+    Outputs go where each command's options say; their default paths (cabinets/, results.jsonl,
+    checkpoints/...) are relative to the current folder. Caches (the compiler's decompositions, the
+    compiled control step) go to $XDG_CACHE_HOME/opend-mj, else ~/.cache/opend-mj ($OPEND_CACHE_DIR,
+    where set, for the compiler's). The built-in hands
+    and the shipped checkpoints are read from the installed package, which no command writes to.
+    """
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ import click
               help="A PartNet-Mobility folder of id folders (e.g. your StorageFurniture copy). "
                    "Default: procedural cabinets, generated into <out>/.sources.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("cabinets"),
-              show_default=True, help="Output folder for compiled cabinets and manifest.json.")
+              show_default=True, help="Output folder for compiled cabinets and manifest.json (in the current folder by default).")
 @click.option("--ids", default=None, help="Comma-separated source ids to build (default: all).")
 @click.option("--count", type=click.IntRange(min=1), default=None,
               help="Number of procedural cabinets (default 346), or the first N sources of --source.")

@@ -70,7 +70,7 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Demonstrations file (repeatable).")
 @click.option("--hand", default="allegro", show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Checkpoint [checkpoints/bc_<hand>.pt]; a .json summary is written beside it.")
+              help="Checkpoint [checkpoints/bc_<hand>.pt in the current folder, which --policy bc then loads before the shipped one]; a .json summary is written beside it.")
 @click.option("--max-demos", type=click.IntRange(min=1), default=None,
               help="Train on the first N successful demos of the files only (data-scale studies).")
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="Optimiser steps [3000].")

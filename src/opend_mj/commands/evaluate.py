@@ -63,7 +63,7 @@ def _check_cabinets(ctx, param, value):
               help="local: this machine's process pool; ray: a Ray cluster (--address) or a local Ray instance.")
 @click.option("--address", default=None, help="Ray cluster address (e.g. auto, ray://head:10001); with --backend ray.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("results.jsonl"),
-              show_default=True)
+              show_default=True, help="Results file, one JSON line per episode (in the current folder by default).")
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, callback=_check_cabinets)
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="First K targets of the split only.")
@@ -89,7 +89,7 @@ def _check_cabinets(ctx, param, value):
 @click.option("--policy", default=None, metavar="bc|module:Class|file.py[:Class]",
               help="Evaluate this agent instead of the planner (see README, Evaluation protocol); "
                    "its name is the results' solver column. bc: the behaviour-cloning policy "
-                   "(checkpoints/bc_<hand>.pt; docs/demonstrations.md).")
+                   "(checkpoints/bc_<hand>.pt in the current folder, else the shipped one; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
 @click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
@@ -312,18 +312,28 @@ def report(results_dir, out, readme, no_readme):
 @click.option("--depths", default="-0.01,0.0,0.008", show_default=True)
 @click.option("--workers", type=int, default=1, show_default=True)
 @click.option("--save/--no-save", default=True, show_default=True)
-def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save):
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Where to save the grasp tuning [the hand folder's grasp.json; a built-in hand of an "
+                   "installed package is never written, so there --out is needed].")
+def search_grasp(hand, cabinets_dir, n_cabinets, scales, depths, workers, save, out):
     """Search finger closing and grasp depth on the first training cabinets; save the hand's grasp.json."""
     from opend_mj.evaluation.grasp_search import search_grasp as _search
+    from opend_mj.resources import in_package
+    from opend_mj.sim.hands import get_hand
 
+    try:
+        out = out or get_hand(hand).grasp_file
+    except KeyError as exc:
+        raise click.BadParameter(exc.args[0], param_hint="'--hand'") from exc
+    if save and in_package(out):
+        raise click.UsageError(f"{out} lies inside the installed package, which is never written: "
+                               "pass --out FILE (or --no-save)")
     profile = _search(hand, cabinets_dir, n_cabinets=n_cabinets,
                       scales=[float(x) for x in scales.split(",")],
                       depths=[float(x) for x in depths.split(",")], workers=workers)
     click.echo(f"chosen: close_scale={profile.close_scale} grasp_depth={profile.grasp_depth}")
     if save:
-        from opend_mj.sim.hands import get_hand
-
-        click.echo(f"saved {profile.save(get_hand(hand).grasp_file)}")
+        click.echo(f"saved {profile.save(out)}")
 
 
 @click.command("evaluate-solver")

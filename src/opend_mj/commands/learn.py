@@ -46,7 +46,7 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 @click.option("--solver", type=click.Choice(["fasterrcnn", "cliport"]), required=True)
 @click.option("--data", "data_dir", type=click.Path(path_type=Path), default=DEFAULT_DATA, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="Checkpoint to write [checkpoints/<solver>.pt].")
+              help="Checkpoint to write [checkpoints/<solver>.pt in the current folder, which the solver then loads before the shipped one].")
 @click.option("--state", type=click.Path(path_type=Path), default=None,
               help="Full training state for --resume [out/train/<name>.state.pt].")
 @click.option("--epochs", type=int, default=None, help="[fasterrcnn 6, cliport 10]")

@@ -27,19 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from opend_mj import resources
 from opend_mj.policy.learned.bc import (STEP_KEYS, WATCH_KEY, checkpoint_paths, context_features, decode_action,
                                         load_policies, step_actions, step_features)
 from opend_mj.policy.perception.watch import FrontWatcher, WatchConfig
 
 
 def default_checkpoint(hand: str) -> Path:
-    """``checkpoints/bc_<hand>.pt`` here, else in the project's checkout."""
-    rel = Path("checkpoints") / f"bc_{hand}.pt"
-    if rel.is_file():
-        return rel
-    from opend_mj import PROJECT_ROOT
-
-    return PROJECT_ROOT / rel
+    """``checkpoints/bc_<hand>.pt`` here, else the shipped one (`opend_mj.resources`)."""
+    return resources.default_checkpoint(f"bc_{hand}.pt")
 
 
 class BCAgent:

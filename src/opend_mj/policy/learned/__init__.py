@@ -29,6 +29,8 @@ def checkpoint_tensors(checkpoint) -> dict:
 def load_checkpoint(checkpoint, default, what: str, train_command: str, build, device=None):
     """``(model in eval mode on device, config, checkpoint dict)``, cached per path and device.
 
+    ``default``: the file name of the checkpoint to load when ``checkpoint`` is None, found by
+    `opend_mj.resources.default_checkpoint` (``checkpoints/`` here, else the shipped one).
     ``build(ckpt) -> (model, config)`` makes the untrained model from the checkpoint's config; the
     weights are loaded here (as float32). A missing file is a clear error naming the file and the
     command that makes one.
@@ -37,7 +39,9 @@ def load_checkpoint(checkpoint, default, what: str, train_command: str, build, d
 
     import torch
 
-    path = Path(checkpoint) if checkpoint is not None else Path(default)
+    from opend_mj.resources import default_checkpoint
+
+    path = Path(checkpoint) if checkpoint is not None else default_checkpoint(default)
     device = device or ("cuda" if torch.cuda.is_available() else "cpu")
     key = (str(path.resolve()), device, what)
     if key not in _LOADED:

@@ -40,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_CHECKPOINT = Path("checkpoints/cliport.pt")
+#: The shipped model's file name (`opend_mj.resources.default_checkpoint` finds it).
+DEFAULT_CHECKPOINT = "cliport.pt"
 DEPTH_MEAN, DEPTH_SCALE = 2.5, 1.0
 
 

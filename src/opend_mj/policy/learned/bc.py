@@ -308,7 +308,7 @@ def load_policy(path, device: str = "cpu"):
         dims = ckpt["dims"]
         return build_model(dims["ctx"], dims["step"], dims["act"], config), config
 
-    return load_checkpoint(path, "checkpoints/bc_allegro.pt", "behaviour-cloning policy",
+    return load_checkpoint(path, "bc_allegro.pt", "behaviour-cloning policy",
                            "opend train-policy", build, device=device)
 
 

@@ -28,11 +28,13 @@ import shutil
 import subprocess
 import tempfile
 import warnings
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-SOURCE = Path(__file__).with_name("step.c")
+#: package data (pyproject.toml), read where the package is installed
+SOURCE = Path(str(resources.files(__name__) / "step.c"))
 ENV_VAR = "OPEND_FASTSTEP"
 
 _loaded: tuple | None = None  # (library or None, why not)

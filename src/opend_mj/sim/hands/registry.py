@@ -1,5 +1,5 @@
-"""The hand registry: one :class:`HandModel` per name (the four built-in ones in ``hands/<name>/``
-and any a user registers).
+"""The hand registry: one :class:`HandModel` per name (the four built-in ones in ``hands/<name>/``,
+shipped with the package (`opend_mj.resources`), and any a user registers).
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from opend_mj import PROJECT_ROOT
+from opend_mj import resources
 from opend_mj.sim.hands.settings import (
     GRASP_FILE,
     PLANNER_FILE,
@@ -18,7 +18,8 @@ from opend_mj.sim.hands.settings import (
 )
 from opend_mj.sim.hands.spec import HandSpec
 
-HANDS_DIR = PROJECT_ROOT / "hands"
+#: The built-in hands' folder: the package's copy when installed, the clone's ``hands/`` otherwise.
+HANDS_DIR = resources.hands_dir()
 BUILTIN_HANDS = ("franka", "allegro", "shadow", "skeleton")
 
 @dataclass(frozen=True)

@@ -10,7 +10,8 @@ import numpy as np
 
 
 BACKBONES = ("resnet50_fpn", "mobilenet_v3_large_fpn", "mobilenet_v3_large_320_fpn", "compact_fpn")
-DEFAULT_CHECKPOINT = Path("checkpoints/fasterrcnn.pt")
+#: The shipped detector's file name (`opend_mj.resources.default_checkpoint` finds it).
+DEFAULT_CHECKPOINT = "fasterrcnn.pt"
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from opend_mj.language import describe_instruction
 from opend_mj.policy.handle import NO_HANDLE, centres_overlap
 from opend_mj.policy.learned.detector.matching import box_orientation, consistent_choice, match_instruction
 from opend_mj.policy.learned.detector.model import KIND_LABELS, Detections, detect_handles, load_detector
+from opend_mj.resources import default_checkpoint
 
 
 @dataclass(frozen=True)
@@ -227,9 +228,9 @@ class FasterRCNNSolver:
                          score=score, from_depth=from_depth)
 
 
-#: The detector trained on a real depth sensor's images as well as exact renders (`opend train
-#: --depth-noise`; checkpoints/README.md).
-SENSOR_CHECKPOINT = Path("checkpoints/fasterrcnn_sensor.pt")
+#: The file name of the detector trained on a real depth sensor's images as well as exact renders
+#: (`opend train --depth-noise`; checkpoints/README.md), found by `opend_mj.resources.default_checkpoint`.
+SENSOR_CHECKPOINT = "fasterrcnn_sensor.pt"
 
 
 class SensorFasterRCNNSolver(FasterRCNNSolver):
@@ -240,4 +241,4 @@ class SensorFasterRCNNSolver(FasterRCNNSolver):
     name = "fasterrcnn-sensor"
 
     def __init__(self, checkpoint: Path | str | None = None, **options):
-        super().__init__(checkpoint if checkpoint is not None else SENSOR_CHECKPOINT, **options)
+        super().__init__(checkpoint if checkpoint is not None else default_checkpoint(SENSOR_CHECKPOINT), **options)
