@@ -104,28 +104,36 @@ expert-check: install
 	$(BIN)/opend expert-check --hand franka --hand allegro --hand shadow --hand skeleton --switch 2 --switch 4 \
 		--switch 6 --switch 8 --workers $(WORKERS) --out results/expert/planner_test.jsonl
 
-## One hand's behaviour-cloning checkpoint from nothing (generated cabinets only; deterministic for SEED):
-## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, the checkpoint,
-## then its record on the generated test split. HAND=allegro DAGGER=3 SEEDS=2 STEPS=3000 (each round's
-## training) FINAL_STEPS=9000 (the final round's, on all the data); BC_ARGS: more
-## `opend train-policy` options (--grasp-token).
+## One hand's behaviour-cloning policy (generated cabinets only; deterministic for SEED), resumable:
+## the planner's demonstrations, round 0 and DAgger rounds with the planner as expert, each round's
+## policy and validation figures kept in checkpoints/bc_rounds/$(HAND)/ (commit them: a later run
+## continues from the last round kept, and makes the rollouts again from them where build/ lacks
+## them), the final policy (every training cabinet, from the best round) shipped as
+## checkpoints/bc_$(HAND).pt, then its record on the generated test split. Prints each stage's wall time.
+## HAND=allegro DAGGER=3 (rounds after round 0) SEEDS=2 STEPS=3000 (round 0) ROUND_STEPS=2000 (later
+## rounds, warm-started) FINAL_STEPS=6000; BC_ARGS: more `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3
 SEEDS ?= 2
 STEPS ?= 3000
-FINAL_STEPS ?= 9000
+ROUND_STEPS ?= 2000
+FINAL_STEPS ?= 6000
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
 BC_ARGS ?=
 train-bc: install assets
-	$(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) --solver oracle \
-		--workers $(WORKERS) --out $(BC_DIR)/demos.hdf5
-	$(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) --seed $(SEED) \
-		--dagger $(DAGGER) --final-steps $(FINAL_STEPS) --cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger \
-		--workers $(WORKERS) \
-		$(BC_ARGS) --out $(BC_DIR)/bc_$(HAND).pt
-	$(BIN)/opend run --policy bc --policy-arg checkpoint=$(BC_DIR)/bc_$(HAND).pt --hand $(HAND) --split test \
-		--cabinets $(CABINETS) --workers $(WORKERS) --out $(BC_DIR)/test.jsonl
+	@t=$$(date +%s); $(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) \
+		--solver oracle --workers $(WORKERS) --out $(BC_DIR)/demos.hdf5 && \
+		echo "train-bc: demonstrations $$(( $$(date +%s) - t )) s"
+	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) \
+		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) \
+		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
+		--workers $(WORKERS) --threads $(WORKERS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \
+		echo "train-bc: DAgger rounds and final policy $$(( $$(date +%s) - t )) s"
+	@t=$$(date +%s); rm -f results/bc/$(HAND)_shipped_test.jsonl; $(BIN)/opend run --policy bc \
+		--policy-arg checkpoint=checkpoints/bc_$(HAND).pt --hand $(HAND) --split test --cabinets $(CABINETS) \
+		--workers $(WORKERS) --out results/bc/$(HAND)_shipped_test.jsonl && \
+		echo "train-bc: test split $$(( $$(date +%s) - t )) s"
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

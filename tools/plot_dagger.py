@@ -1,13 +1,13 @@
-"""Plot success against DAgger rounds and training data, per hand, from `opend train-policy --dagger` summaries.
+"""Plot validation success against DAgger rounds, per hand, from the kept rounds of `opend train-policy --dagger`.
 
-    python tools/plot_dagger.py build/bc/allegro/dagger/dagger.json build/bc/franka/dagger/dagger.json \
-        --test allegro=build/bc/allegro/test.jsonl --out docs/dagger.png
+    python tools/plot_dagger.py --out docs/dagger.png            # checkpoints/bc_rounds/<hand>/round_<i>.json
 
-Each summary (``dagger.json`` in a run's ``--dagger-dir``) gives, per round, the validation success
-(training cabinets kept apart) and the data it trained on (demonstrations and labelled rollouts);
-the plot has one line per hand, validation success against the round, each point labelled with its
-demonstrations + rollouts. ``--test HAND=records.jsonl`` adds the final policy's success on the
-generated test split as a marker after the last round.
+Each kept round's figures (``round_<i>.json`` in ``--rounds DIR/<hand>``) give its validation
+success on the training cabinets kept apart, overall and per kind; the plot has one panel per hand:
+overall (solid), drawers and doors (dashed, dotted), each overall point labelled with the labelled
+rollouts it trained on. Where the shipped policy's generated test-split record exists
+(``results/bc/<hand>_shipped_test.jsonl``), its success is a star after the last round. The figure
+shows where more rounds stop helping.
 """
 
 from __future__ import annotations
@@ -17,11 +17,18 @@ import json
 from pathlib import Path
 
 
+def kept_rounds(folder: Path) -> list[dict]:
+    """The figures of every kept round in ``folder``, by round."""
+    rounds = [json.loads(p.read_text()) for p in folder.glob("round_*.json") if not p.name.endswith(".train.json")]
+    return sorted(rounds, key=lambda r: r["round"])
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("summaries", nargs="+", type=Path)
-    parser.add_argument("--test", action="append", default=[], metavar="HAND=RECORDS",
-                        help="the final policy's records on the test split (repeatable)")
+    parser.add_argument("--rounds", type=Path, default=Path("checkpoints/bc_rounds"),
+                        help="folder with one subfolder of kept rounds per hand")
+    parser.add_argument("--tests", type=Path, default=Path("results/bc"),
+                        help="folder of the shipped policies' test records (<hand>_shipped_test.jsonl)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
 
@@ -30,35 +37,38 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tests = {}
-    for item in args.test:
-        hand, _, path = item.partition("=")
-        records = [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
-        tests[hand] = 100.0 * sum(bool(r.get("success")) for r in records) / max(1, len(records))
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    for path in args.summaries:
-        summary = json.loads(path.read_text())
-        rounds = summary["rounds"]
+    hands = {d.name: kept_rounds(d) for d in sorted(args.rounds.iterdir()) if d.is_dir()} if args.rounds.is_dir() else {}
+    hands = {h: r for h, r in hands.items() if r}
+    if not hands:
+        parser.error(f"{args.rounds}: no kept rounds (round_<i>.json under <hand>/)")
+    fig, axes = plt.subplots(1, len(hands), figsize=(3.6 * len(hands), 3.6), squeeze=False, sharey=True)
+    for ax, (hand, rounds) in zip(axes[0], hands.items()):
         x = [r["round"] for r in rounds]
-        y = [r["val_success"] for r in rounds]
-        line, = ax.plot(x, y, marker="o", label=f"{summary['hand']} (validation, {rounds[0]['val_episodes']} episodes)")
+        line, = ax.plot(x, [r["val_success"] for r in rounds], marker="o", label="validation")
+        for key, style in (("val_drawer", "--"), ("val_door", ":")):
+            ax.plot(x, [r.get(key) for r in rounds], linestyle=style, color=line.get_color(), alpha=0.7,
+                    label=key.split("_")[1] + "s")
         for r in rounds:
-            ax.annotate(f"{r['demos']}+{r['rollouts']}", (r["round"], r["val_success"]), textcoords="offset points",
+            ax.annotate(str(r["rollouts"]), (r["round"], r["val_success"]), textcoords="offset points",
                         xytext=(0, 7), ha="center", fontsize=7)
-        if summary["hand"] in tests:
-            ax.plot([x[-1] + 0.15], [tests[summary["hand"]]], marker="*", markersize=11, color=line.get_color(),
-                    linestyle="none", label=f"{summary['hand']} (test split, final policy)")
-    ax.set_xlabel("DAgger round (0: demonstrations only); labels: demonstrations + labelled rollouts")
-    ax.set_ylabel("opened (> 20 %), %")
-    ax.set_ylim(0, 100)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
-    ax.set_xticks(sorted({r["round"] for p in args.summaries for r in json.loads(p.read_text())["rounds"]}))
-    ax.set_title("BC with DAgger (the planner as expert), generated cabinets", fontsize=10)
+        test = args.tests / f"{hand}_shipped_test.jsonl"
+        if test.is_file():
+            records = [json.loads(line) for line in test.read_text().splitlines() if line.strip()]
+            rate = 100.0 * sum(bool(r.get("success")) for r in records) / max(1, len(records))
+            ax.plot([x[-1] + 0.3], [rate], marker="*", markersize=11, color="k", linestyle="none",
+                    label=f"shipped, test split ({len(records)})")
+        ax.set_title(f"{hand} ({rounds[0]['val_episodes']} validation episodes)", fontsize=9)
+        ax.set_xlabel("DAgger round (labels: rollouts trained on)", fontsize=8)
+        ax.set_xticks(x)
+        ax.set_ylim(0, 100)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    axes[0][0].set_ylabel("opened (> 20 %), %")
+    fig.suptitle("Behaviour cloning with DAgger (the planner as expert), generated cabinets", fontsize=10)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=120)
-    print(f"wrote {args.out}")
+    print(f"{', '.join(f'{h}: {len(r)} rounds' for h, r in hands.items())} -> {args.out}")
     return 0
 
 
