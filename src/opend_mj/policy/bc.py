@@ -50,7 +50,9 @@ class BCAgent:
     ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
     values weight the newest predictions most); ``drawer`` / ``door``: the checkpoints (same
     form as ``checkpoint``) that act on that kind of target instead. Over several checkpoints, the
-    defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
+    defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs. The checkpoints named
+    here are loaded when the agent is made (read as plain data, `checkpoint_io.read_checkpoint`), so
+    that one missing or refused stops `opend run` before its first episode."""
 
     control = "absolute"
     images = "first"
@@ -70,6 +72,9 @@ class BCAgent:
         self.ensemble_decay = ensemble_decay
         self.name = name or f"bc-{solver}"
         self._episode = None
+        for spec in (checkpoint, drawer, door):  # cached: reset() finds them loaded
+            if spec:
+                load_policies(checkpoint_paths(spec))
 
     @property
     def solver(self):
