@@ -149,7 +149,7 @@ def test_train_policy_and_run_it_as_an_agent(demos_file, small_dataset, tmp_path
         result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(ckpt),
                                            "--steps", "20", "--batch-size", "16", "--d-model", "16", "--no-progress"])
         assert result.exit_code == 0, result.output
-        ckpts.append(torch.load(ckpt, weights_only=False))
+        ckpts.append(torch.load(ckpt, weights_only=True))
     summary = json.loads((tmp_path / "bc_a.json").read_text())
     assert summary["demos"] == 2 and summary["hand"] == "franka" and summary["history"][-1]["step"] == 20
     for key, value in ckpts[0]["model"].items():
@@ -263,7 +263,7 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     result = CliRunner().invoke(main, ["bundle-policy", str(routed), "--out", str(rerouted), "--route", "drawer=1",
                                        "--route", "door=0"])
     assert result.exit_code == 0, result.output
-    assert torch.load(rerouted, weights_only=False)["summary"]["sources"] == [str(ckpts["s0"]), str(ckpts["s1"])]
+    assert torch.load(rerouted, weights_only=True)["summary"]["sources"] == [str(ckpts["s0"]), str(ckpts["s1"])]
     assert len(load_policies([rerouted], kind="door")) == 1
     drawer_action, agent = first_action(str(routed), "drawer")
     assert len(agent.models) == 1
@@ -489,14 +489,14 @@ def test_a_warm_start_trains_on_from_a_checkpoint_and_refuses_one_that_does_not_
     result = CliRunner().invoke(main, ["train-policy", *common, "--out", str(warm), "--steps", "5", "--lr", "0",
                                        "--init", str(base)])
     assert result.exit_code == 0, result.output
-    a, b = torch.load(base, weights_only=False), torch.load(warm, weights_only=False)
+    a, b = torch.load(base, weights_only=True), torch.load(warm, weights_only=True)
     assert b["config"]["d_model"] == 16 and b["summary"]["init"] == str(base)
     for key, value in a["model"].items():
         assert torch.equal(value, b["model"][key]), key
     trained = tmp_path / "trained.pt"
     result = CliRunner().invoke(main, ["train-policy", *common, "--out", str(trained), "--steps", "5", "--init", str(base)])
     assert result.exit_code == 0, result.output
-    moved = torch.load(trained, weights_only=False)["model"]
+    moved = torch.load(trained, weights_only=True)["model"]
     assert any(not torch.equal(a["model"][k], moved[k]) for k in a["model"] if not k.endswith(("_mean", "_std")))
     assert all(torch.equal(a["model"][k], moved[k]) for k in a["model"] if k.endswith(("_mean", "_std")))
 

@@ -346,13 +346,13 @@ def save_half(src: Path, dst: Path) -> None:
     ``<dst>.train.json``."""
     import shutil
 
-    import torch
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint, write_checkpoint
 
-    ckpt = torch.load(src, map_location="cpu", weights_only=True)
+    ckpt = read_checkpoint(src, "behaviour-cloning policy checkpoint")
     ckpt["model"] = {k: (v.half() if v.is_floating_point() else v) for k, v in ckpt["model"].items()}
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_suffix(".tmp")
-    torch.save(ckpt, tmp)
+    write_checkpoint(ckpt, tmp)
     tmp.replace(dst)
     shutil.copyfile(src.with_suffix(".json"), dst.with_suffix(".train.json"))
 

@@ -131,6 +131,7 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
             parse_policy_args,
             resolve_policy,
         )
+        from opend_mj.policy.learned.checkpoint_io import CheckpointError
 
         if ctx.get_parameter_source("solver") is not click.core.ParameterSource.DEFAULT:
             raise click.UsageError("--policy and --solver exclude each other (an agent finds the handle itself)")
@@ -139,6 +140,8 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
             target, attr = resolve_policy(policy)
             policy_spec = f"{target}:{attr}"
             actor = agent_name(load_agent(policy_spec, parsed_args))
+        except CheckpointError as exc:  # a file refused unread: a failure (exit 1), not a usage error
+            raise click.ClickException(str(exc)) from None
         except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
             raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
     elif policy_args:

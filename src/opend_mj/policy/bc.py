@@ -49,7 +49,9 @@ class BCAgent:
     ``ensemble_decay``: the temporal ensemble's weight decay (default: the checkpoint's; negative
     values weight the newest predictions most); ``drawer`` / ``door``: the checkpoints (same
     form as ``checkpoint``) that act on that kind of target instead. Over several checkpoints, the
-    defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs."""
+    defaults of ``stop_time`` and ``ensemble_decay`` are the mean of theirs. The checkpoints named
+    here are loaded when the agent is made (read as plain data, `checkpoint_io.read_checkpoint`), so
+    that one missing or refused stops `opend run` before its first episode."""
 
     control = "absolute"
     #: RGB-D every ``image_every`` steps: the front watched (set at reset from the checkpoint's ``watch``)
@@ -73,6 +75,9 @@ class BCAgent:
         self.image_every = WatchConfig().every
         self.watcher = None
         self.last_watch = None  # the watched front's numbers of the latest step (`perception.watch`)
+        for spec in (checkpoint, drawer, door):  # cached: reset() finds them loaded
+            if spec:
+                load_policies(checkpoint_paths(spec))
 
     @property
     def solver(self):

@@ -19,10 +19,10 @@ _LOADED: dict = {}
 
 def checkpoint_tensors(checkpoint) -> dict:
     """A checkpoint's model tensors as float32 (a training checkpoint's ``model`` entry, or a bare
-    state dict), for fine-tuning from it."""
-    import torch
+    state dict), for fine-tuning from it (read as plain data: `checkpoint_io.read_checkpoint`)."""
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
 
-    src = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    src = read_checkpoint(checkpoint, "checkpoint to start from (--init)")
     return {k: v.float() for k, v in src.get("model", src).items()}
 
 
@@ -33,12 +33,14 @@ def load_checkpoint(checkpoint, default, what: str, train_command: str, build, d
     `opend_mj.resources.default_checkpoint` (``checkpoints/`` here, else the shipped one).
     ``build(ckpt) -> (model, config)`` makes the untrained model from the checkpoint's config; the
     weights are loaded here (as float32). A missing file is a clear error naming the file and the
-    command that makes one.
+    command that makes one; a file that is not plain data is refused unread
+    (`checkpoint_io.read_checkpoint`).
     """
     from pathlib import Path
 
     import torch
 
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
     from opend_mj.resources import default_checkpoint
 
     path = Path(checkpoint) if checkpoint is not None else default_checkpoint(default)
@@ -48,7 +50,7 @@ def load_checkpoint(checkpoint, default, what: str, train_command: str, build, d
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no {what} checkpoint; train one with `{train_command}` "
                                     "(or pass checkpoint=)")
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        ckpt = read_checkpoint(path, f"{what} checkpoint")
         model, config = build(ckpt)
         model.load_state_dict({k: v.float() for k, v in ckpt["model"].items()})
         model.eval().to(device)

@@ -384,14 +384,14 @@ def load_policies(paths, device: str = "cpu", kind: str | None = None) -> list:
     the lags (an error names the file that does not)."""
     from pathlib import Path
 
-    import torch
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
 
     members = []
     for path in (Path(p) for p in paths):
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no behaviour-cloning policy checkpoint; train one with "
                                     "`opend train-policy` (or pass checkpoint=)")
-        head = torch.load(path, map_location="cpu", weights_only=False)
+        head = read_checkpoint(path, "behaviour-cloning policy checkpoint")
         if head.get("format") == ENSEMBLE_FORMAT:
             key = ("ensemble", str(path.resolve()), device)
             if key not in _BUNDLES:
@@ -437,14 +437,13 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     bundle's summary."""
     from pathlib import Path
 
-    import torch
-
     from opend_mj.language import TARGET_KINDS
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint, write_checkpoint
 
     load_policies(paths)  # the same checks as at run time, before anything is written
     members, sources = [], []
     for path in paths:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        ckpt = read_checkpoint(path, "behaviour-cloning policy checkpoint")
         bundled = ckpt.get("format") == ENSEMBLE_FORMAT
         members += ckpt["members"] if bundled else [ckpt]
         # a bundle re-bundled (e.g. to add a route) keeps the files its members came from
@@ -473,7 +472,7 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
               "routes": routes}
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(bundle, out)
+    write_checkpoint(bundle, out)
     return summary
 
 

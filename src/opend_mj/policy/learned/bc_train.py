@@ -238,18 +238,16 @@ ARCHITECTURE_FIELDS = ("chunk", "lags", "d_model", "heads", "enc_layers", "dec_l
 
 def _warm_start(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> tuple[BCConfig, dict]:
     """(``config`` with the architecture of the checkpoint ``init`` (:data:`ARCHITECTURE_FIELDS`), its
-    weights and standardisation as float32): the checkpoint read once; one of another hand or other
-    input sizes is refused with one line naming it."""
+    weights and standardisation as float32): the checkpoint read once, as plain data
+    (`checkpoint_io.read_checkpoint`: a file that needs more is refused unread); one of another hand
+    or other input sizes is refused with one line naming it."""
     import dataclasses
 
-    import torch
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
 
     if not init.is_file():
         raise FileNotFoundError(f"{init}: no checkpoint to start from (--init)")
-    try:
-        ckpt = torch.load(init, map_location="cpu", weights_only=False)
-    except Exception as exc:  # a damaged or foreign file: pickle, zip and torch errors alike
-        raise ValueError(f"{init}: not a checkpoint of `opend train-policy` (--init): {type(exc).__name__}") from None
+    ckpt = read_checkpoint(init, "checkpoint of `opend train-policy` (--init)")
     if not isinstance(ckpt, dict) or "model" not in ckpt or "dims" not in ckpt:
         raise ValueError(f"{init}: not a checkpoint of `opend train-policy` (--init)")
     if ckpt.get("hand") not in (None, hand):
@@ -267,10 +265,11 @@ def _warm_start(init: Path, config: BCConfig, hand: str, data: DemoArrays) -> tu
 
 
 def save_checkpoint(model, summary: dict, data: DemoArrays, adapter, out: Path) -> None:
-    """The model (float32 weights), its config, input sizes and the hand's finger ranges."""
+    """The model (float32 weights), its config, input sizes and the hand's finger ranges, as plain
+    data (`checkpoint_io.write_checkpoint`)."""
     import json
 
-    import torch
+    from opend_mj.policy.learned.checkpoint_io import write_checkpoint
 
     out.parent.mkdir(parents=True, exist_ok=True)
     ckpt = {"model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
@@ -278,7 +277,7 @@ def save_checkpoint(model, summary: dict, data: DemoArrays, adapter, out: Path) 
             "dims": {"ctx": int(data.ctx.shape[1]), "step": int(data.steps.shape[1]), "act": int(data.actions.shape[1])},
             "finger_low": adapter.finger_low.tolist(), "finger_high": adapter.finger_high.tolist(),
             "max_time": summary["max_time"], "stop_time": summary["stop_time"], "summary": summary}
-    torch.save(ckpt, out)
+    write_checkpoint(ckpt, out)
     out.with_suffix(".json").write_text(json.dumps(summary, indent=1) + "\n")
 
 

@@ -146,12 +146,12 @@ class _Loop:
         self.rebuild_scheduler = False
 
     def resume(self, model, optimiser, scheduler) -> None:
-        import torch
+        from opend_mj.policy.learned.checkpoint_io import read_checkpoint
 
         if not self.state_path.is_file():
             self.log(f"resume: no state at {self.state_path}; starting fresh")
             return
-        st = torch.load(self.state_path, map_location="cpu", weights_only=False)
+        st = read_checkpoint(self.state_path, "training state (--resume)")
         model.load_state_dict(st["model"])
         optimiser.load_state_dict(st["optimiser"])
         self.history = st["history"]
@@ -168,8 +168,9 @@ class _Loop:
         return self.deadline is not None and time.time() > self.deadline
 
     def save(self, epoch: int, model, optimiser, scheduler, payload: dict, metric: str | None = None) -> None:
-        """Training state always; the shipped checkpoint when the validation metric is the best so far."""
-        import torch
+        """Training state always; the shipped checkpoint when the validation metric is the best so far;
+        both as plain data (`checkpoint_io.write_checkpoint`)."""
+        from opend_mj.policy.learned.checkpoint_io import write_checkpoint
 
         self.out.parent.mkdir(parents=True, exist_ok=True)
         self.state_path.parent.mkdir(parents=True, exist_ok=True)
@@ -178,10 +179,10 @@ class _Loop:
             or not self.out.is_file()
         if improved and value is not None and np.isfinite(value):
             self.best = float(value)
-        torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(),
-                    "scheduler": scheduler.state_dict() if scheduler is not None else None,
-                    "epoch": epoch, "epochs": self.epochs, "history": self.history, "best": self.best,
-                    "trained_seconds": self.trained_seconds}, self.state_path)
+        write_checkpoint({"model": model.state_dict(), "optimiser": optimiser.state_dict(),
+                          "scheduler": scheduler.state_dict() if scheduler is not None else None,
+                          "epoch": epoch, "epochs": self.epochs, "history": self.history, "best": self.best,
+                          "trained_seconds": self.trained_seconds}, self.state_path)
         if not improved:
             self.log(f"kept {self.out} (best validation {metric} {self.best:.3f})")
             meta = json.loads(self.out.with_suffix(".json").read_text())
@@ -191,7 +192,7 @@ class _Loop:
         ckpt = {"solver": self.solver, "model": _half_state(model), "epoch": epoch, "history": self.history,
                 "trained_seconds": round(self.trained_seconds, 1), **payload}
         tmp = self.out.with_suffix(".tmp")
-        torch.save(ckpt, tmp)
+        write_checkpoint(ckpt, tmp)
         tmp.replace(self.out)
         self.out.with_suffix(".json").write_text(json.dumps(
             {k: v for k, v in ckpt.items() if k not in ("model", "text")}, indent=1, default=str) + "\n")
@@ -242,10 +243,13 @@ def load_pretrained(model, path: Path, solver: str, log: Callable[[str], None] =
     ``cliport``: a ``resnet18`` state dict (conv1's RGB filters go to the RGB channels, the depth and
     coordinate channels start at zero). ``fasterrcnn``: a ``mobilenet_v3_large`` or ``resnet50`` state
     dict, loaded into ``backbone.body``. Keys that do not fit are skipped. Returns the tensors loaded.
+    The file is read as plain data (`checkpoint_io.read_checkpoint`), as torchvision's are.
     """
     import torch
 
-    src = torch.load(path, map_location="cpu", weights_only=False)
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
+
+    src = read_checkpoint(path, "pretrained state dict (--pretrained)")
     src = src.get("model", src.get("state_dict", src)) if isinstance(src, dict) else src
     own = model.state_dict()
     mapped = {}
