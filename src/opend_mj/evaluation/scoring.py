@@ -5,6 +5,10 @@ paper's), and from the fraction of the joint range opened at 75 % (ManiSkill3's 
 OpenCabinet tasks: ``range_ratio``, or the record's raw ``joint_value`` and ``joint_range``; a record
 with neither, written before they were recorded, shows n/a). Error records (``"error"`` in the line)
 count as failures at stage ``error``. When several files hold the same episode key, the last one wins.
+
+Files compared with each other should hold the same episodes: `episode_set_warnings` names each pair
+that does not (an episode here is its key without the solver or agent: `task_key`), and
+`merge_runs` with ``common`` keeps only the episodes every file holds (`opend score --common`).
 """
 
 from __future__ import annotations
@@ -49,13 +53,52 @@ def intervals_overlap(a: tuple[int, int], b: tuple[int, int]) -> bool:
 
 
 def load_records(paths: Iterable[Path]) -> list[dict]:
-    from opend_mj.evaluation.episode import episode_key
+    """Every record of the files, the last file's winning where several hold one episode key."""
+    return merge_runs(load_runs(paths))
+
+
+def task_key(record: dict) -> tuple:
+    """An episode's identity across runs: its `episode_key` without the solver or agent that ran it
+    (cabinet, target joint, hand, seed, light scale, pull, wording, physics step, perturbation)."""
+    from opend_mj.evaluation.episode import EPISODE_FIELDS
+
+    return tuple(f.normalise(f.value(record)) for f in EPISODE_FIELDS if f.in_key and f.name != "solver")
+
+
+def load_runs(paths: Iterable[Path]) -> list[tuple[Path, list[dict]]]:
+    """Each results file with its records, in the order given."""
     from opend_mj.evaluation.results import load_results
 
+    return [(Path(p), load_results(Path(p), repair=False)) for p in paths]
+
+
+def episode_set_warnings(runs: list[tuple[Path, list[dict]]]) -> list[str]:
+    """One line per pair of files whose episode sets (`task_key`) differ, with their counts."""
+    sets = [(path, {task_key(r) for r in records}) for path, records in runs]
+    lines = []
+    for i, (a, sa) in enumerate(sets):
+        for b, sb in sets[i + 1:]:
+            if sa != sb:
+                lines.append(f"{a} holds {len(sa)} episodes and {b} {len(sb)}, {len(sa & sb)} of them in both: "
+                             f"their rates are over different episodes (--common scores only those every file holds)")
+    return lines
+
+
+def merge_runs(runs: list[tuple[Path, list[dict]]], common: bool = False) -> list[dict]:
+    """The records of several files, the last file's winning where several hold one episode key;
+    with ``common``, only those of the episodes (`task_key`) that every file holds."""
+    from opend_mj.evaluation.episode import episode_key
+
+    shared = None
+    if common:
+        for _, records in runs:
+            keys = {task_key(r) for r in records}
+            shared = keys if shared is None else shared & keys
     merged: dict[tuple, dict] = {}
-    for p in paths:
-        for r in load_results(Path(p), repair=False):
-            merged[episode_key(r)] = r
+    for _, records in runs:
+        for r in records:
+            if shared is None or task_key(r) in shared:
+                merged[episode_key(r)] = r
     return list(merged.values())
 
 
