@@ -24,6 +24,10 @@ RANGE_THRESHOLD = 0.75
 SPLITS = ("train", "test")
 KINDS = ("drawer", "door", "overall")
 STAGE_ORDER = ("language", "locate", "approach", "grasp", "pull", "physics", "error")
+#: Why the top tier is empty on the generated cabinets, even with oracle boxes (the generator's joint limits).
+TOP_TIER_NOTE = ("Few parts can pass 90 %: a part stops at its joint limit. The generated cabinets' drawers travel "
+                 "70-90 % of their length (85 % the most any record shows) and their doors turn 90-115 degrees "
+                 "(64 % of 180 at most), so on them this tier is 0 for every run.")
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -258,6 +262,8 @@ def report_markdown(records: list[dict]) -> str:
     for th in THRESHOLDS:
         lines.append(f"## Success rate, open ratio > {int(round(th * 100))} %")
         lines.append("")
+        if th >= 0.9:
+            lines += [TOP_TIER_NOTE, ""]
         head = "| hand | solver | " + " | ".join(f"{s} {k}" for s in SPLITS for k in KINDS) + " |"
         lines.append(head)
         lines.append("|" + "---|" * (2 + len(SPLITS) * len(KINDS)))
