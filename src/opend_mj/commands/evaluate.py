@@ -87,7 +87,7 @@ def _check_cabinets(ctx, param, value):
               help="Physics step in seconds, e.g. 1/120 (default 1/480). Coarser is faster and softer: "
                    "see BENCHMARKS.md for success and penetration at each.")
 @click.option("--policy", default=None, metavar="bc|module:Class|file.py[:Class]",
-              help="Evaluate this agent instead of the planner (see README, Evaluation protocol); "
+              help="Evaluate this agent instead of the planner (docs/evaluation.md, Agent reference); "
                    "its name is the results' solver column. bc: the behaviour-cloning policy "
                    "(checkpoints/bc_<hand>.pt in the current folder, else the shipped one; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
@@ -256,10 +256,16 @@ def reword(cabinets_dir, split, seed, out):
                    "results/real/oracle_all.json for `opend report`")
 @click.option("--manifest", "manifest_path", type=click.Path(exists=True, path_type=Path), default=None,
               help="with --summary: the build's manifest.json; the targets it excluded count as failures")
-def score(results, csv_path, plot_path, summary_path, manifest_path):
-    """The paper's tables from one or more results files (Markdown to stdout)."""
+@click.option("--common", is_flag=True, default=False,
+              help="score only the episodes every file holds (same cabinet, target, hand, seed and conditions; "
+                   "any solver or agent): files with different episode sets are then compared on the same ones")
+def score(results, csv_path, plot_path, summary_path, manifest_path, common):
+    """The paper's tables from one or more results files (Markdown to stdout). Files that hold
+    different episodes are named on stderr, one line per pair."""
     from opend_mj.evaluation.scoring import (
-        load_records,
+        episode_set_warnings,
+        load_runs,
+        merge_runs,
         plot_success,
         report_markdown,
         write_csv,
@@ -267,9 +273,14 @@ def score(results, csv_path, plot_path, summary_path, manifest_path):
 
     named = ", ".join(str(p) for p in results)
     try:
-        records = load_records(results)
+        runs = load_runs(results)
     except ValueError as exc:  # a corrupt line, or a line that is no episode record: named with its file
         raise click.ClickException(str(exc)) from None
+    for line in episode_set_warnings(runs):
+        click.echo(f"warning: {line}", err=True)
+    records = merge_runs(runs, common=common)
+    if common and not records:
+        raise click.ClickException(f"{named}: no episode is in every file")
     try:
         table = report_markdown(records)
     except (ValueError, TypeError, KeyError, AttributeError) as exc:  # a field of the wrong type

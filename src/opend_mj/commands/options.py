@@ -11,7 +11,18 @@ cabinets_option = click.option(
     show_default=True, help="Compiled dataset folder (with manifest.json).")
 
 target_option = click.option("--target", default=None, help="Target joint (default: the cabinet's first target).")
-hand_option = click.option("--hand", default="allegro", show_default=True)
+
+
+def check_hand(ctx, param, value):
+    """A registered hand's name; a usage error (exit 2) naming the known ones otherwise."""
+    from opend_mj.sim.hands import list_hands
+
+    if value not in list_hands():
+        raise click.BadParameter(f"unknown hand {value!r}; known: {', '.join(list_hands())}", ctx, param)
+    return value
+
+
+hand_option = click.option("--hand", default="allegro", show_default=True, callback=check_hand)
 room_option = click.option("--room", type=click.IntRange(0, 8), default=None,
                            help="Room preset 0-8 (default: from the seed).")
 seed_option = click.option("--seed", type=int, default=0, show_default=True)

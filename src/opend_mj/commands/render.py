@@ -8,6 +8,7 @@ import click
 
 from opend_mj.commands.options import (
     cabinets_option,
+    check_hand,
     episode_from_options,
     scene_options,
 )
@@ -34,7 +35,7 @@ def render(cabinets, cabinet_id, target, hand, room, seed, light_scale, size, ou
 @cabinets_option
 @click.option("--count", type=click.IntRange(1, 12), default=3, show_default=True, help="Cabinets (rows).")
 @click.option("--rooms", default="0,3,6", show_default=True, help="Comma-separated room presets (columns).")
-@click.option("--hand", default="allegro", show_default=True)
+@click.option("--hand", default="allegro", show_default=True, callback=check_hand)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=Path("gallery.png"), show_default=True)
 def gallery(cabinets, count, rooms, hand, seed, out):

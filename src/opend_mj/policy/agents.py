@@ -1,6 +1,6 @@
 """Agents: anything that maps the benchmark's observations to actions, one control step at a time.
 
-The interface `opend run --policy module:Class` evaluates (see the README's "Evaluation protocol")::
+The interface `opend run --policy module:Class` evaluates (docs/evaluation.md, "Agent reference")::
 
     class MyAgent:
         name = "my-agent"          # the results' `solver` column (default: the class name)

@@ -12,12 +12,22 @@ Solvers are made through a registry, ``get_solver(name, **options)``; a later mo
 ``fasterrcnn`` and ``cliport`` with :func:`register_solver`. The ``oracle`` solver returns the
 simulator's ground-truth box of the target handle; it gets that box through its constructor
 (``ground_truth``: a callable returning ``(u0, v0, u1, v1)`` or ``None``), never through globals.
+
+From an agent (`opend_mj.policy.agents`), :func:`locate` asks a shipped solver for the instructed
+handle in an observation and returns its box and world point as the planner would act on them::
+
+    from opend_mj.policy.solvers import locate
+    found = locate(obs, solver="fasterrcnn")   # None: no handle found
+    found.box, found.point                     # HandleBox (pixels), (3,) world metres
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
 
 from opend_mj.policy.handle import HandleBox, HandleSolver
 
@@ -85,3 +95,57 @@ def needs_ground_truth(name: str) -> bool:
 def get_solver(name: str, **options) -> HandleSolver:
     """A solver instance. Options are passed to its factory (``ground_truth=`` for ``oracle``)."""
     return solver_factory(name)(**options)
+
+
+@dataclass(frozen=True)
+class Located:
+    """Where a solver finds the instructed handle in one RGB-D image (:func:`locate`)."""
+
+    #: pixels (u0, v0, u1, v1) of the image, as the planner acts on it: a learned solver's box
+    #: snapped to the handle standing out of the panel in depth, one of a pair of pulls
+    box: HandleBox
+    #: (3,) world metres: the handle's grip centre, the box back-projected with the depth image
+    #: (the handle's front plus its assumed radius; `policy.perception.estimate_handle`)
+    point: np.ndarray
+    #: world x (m) of the handle's front, the face nearest the camera (the cabinet faces -x)
+    front_x: float
+    #: the rest of the planner's view of it (`policy.learned.bc.HandlePercept`: the 3D estimate with
+    #: orientation, bar or knob, extent and panel; the measured shape; a door's hinge side)
+    percept: Any
+
+
+_LOCATORS: dict[tuple, HandleSolver] = {}
+
+
+def locate(obs: dict, instruction: str | None = None, solver: str | Any = "fasterrcnn", **options) -> Located | None:
+    """The instructed handle in an agent's observation through a handle solver, or None where it
+    finds none.
+
+    ``obs`` holds ``rgb``, ``depth``, ``camera_K`` and ``camera_pose`` (an agent's first observation);
+    ``instruction``: default ``obs["instruction"]``. ``solver``: a registered solver that reads no
+    ground truth (``fasterrcnn``, ``fasterrcnn-sensor``, ``cliport``; made once per process with
+    ``options``, e.g. ``checkpoint=``) or an object with ``solve(rgb, depth, instruction,
+    camera_view)``. The box is refined and back-projected as the planner and the behaviour-cloning
+    agent do (`policy.learned.bc.perceive_handle`).
+    """
+    from opend_mj.policy.learned.bc import perceive_handle
+    from opend_mj.sim.camera import CameraView
+
+    if isinstance(solver, str):
+        key = (solver, repr(sorted(options.items())))
+        made = _LOCATORS.get(key)
+        if made is None:
+            if needs_ground_truth(solver):
+                raise ValueError(f"solver {solver!r} reads the simulator's ground truth, which an agent may not")
+            made = _LOCATORS[key] = get_solver(solver, **options)
+        solver = made
+    elif getattr(solver, "needs_ground_truth", False):
+        raise ValueError(f"solver {getattr(solver, 'name', solver)!r} reads the simulator's ground truth")
+    view = CameraView.from_arrays(obs["camera_K"], obs["camera_pose"])
+    text = obs["instruction"] if instruction is None else instruction
+    percept = perceive_handle(solver, np.asarray(obs["rgb"]), np.asarray(obs["depth"]), text, view)
+    if percept is None:
+        return None
+    handle = percept.handle
+    return Located(box=percept.box, point=np.asarray(handle.centre, float).copy(), front_x=float(handle.front_x),
+                   percept=percept)

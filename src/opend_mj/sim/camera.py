@@ -37,6 +37,8 @@ __all__ = [
     "place_camera",
     "add_camera",
     "camera_view",
+    "pixel_to_world",
+    "world_to_pixel",
     "box_corners",
     "geom_box_corners",
     "box_in_image",
@@ -215,6 +217,37 @@ class CameraView:
         h, w = depth_image.shape
         vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
         return self.backproject(uu, vv, depth_image)
+
+    @classmethod
+    def from_arrays(cls, camera_K, camera_pose) -> "CameraView":
+        """The view of an agent's ``camera_K`` (3 x 3, OpenCV-style) and ``camera_pose`` (4 x 4,
+        camera to world, columns right, up, backward, position); the image is ``2 cx`` x ``2 cy``
+        pixels (the principal point is the image centre here)."""
+        k = np.asarray(camera_K, float)
+        pose = np.asarray(camera_pose, float)
+        intrinsics = CameraIntrinsics(fx=float(k[0, 0]), fy=float(k[1, 1]), cx=float(k[0, 2]), cy=float(k[1, 2]),
+                                      width=int(round(2 * k[0, 2])), height=int(round(2 * k[1, 2])))
+        return cls(intrinsics=intrinsics, pos=pose[:3, 3].copy(), rot=pose[:3, :3].copy())
+
+
+def pixel_to_world(u, v, depth, camera_K, camera_pose) -> np.ndarray:
+    """World points (..., 3; m) seen at continuous pixels ``(u, v)`` with planar ``depth`` (m).
+
+    Arrays broadcast together. ``u`` runs right, ``v`` down, and the pixel ``depth_image[row, col]``
+    is seen at ``u = col + 0.5``, ``v = row + 0.5``. ``camera_K`` is OpenCV-style (a camera frame
+    with x right, y down, z forward), ``camera_pose`` maps MuJoCo's camera frame (x right, y up, z
+    backward) to the world, so the camera-frame point is ``((u - cx) d / fx, -(v - cy) d / fy, -d)``:
+    y and z flip sign between the two. `CameraView.backproject` does the arithmetic.
+    """
+    return CameraView.from_arrays(camera_K, camera_pose).backproject(u, v, depth)
+
+
+def world_to_pixel(points, camera_K, camera_pose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, v, depth)`` of world points (..., 3; m): continuous pixels and planar depth (m), each
+    of shape (...); the inverse of :func:`pixel_to_world`. Points behind the camera (depth <= 0)
+    get NaN pixels."""
+    uv, depth = CameraView.from_arrays(camera_K, camera_pose).project(points, return_depth=True)
+    return uv[..., 0], uv[..., 1], np.asarray(depth)
 
 
 def _raw_model_data(physics_or_model_data, data=None):
