@@ -202,3 +202,32 @@ def test_robustness_table_pairs_episodes_and_marks_bands():
     assert "| s | allegro | `light` | 75.0 [53.1-88.8] (15/20) | 70.0 [48.1-85.5] (14/20) -5.0 | " \
            "55.0 [34.2-74.2] (11/20) -20.0 ! |" in md
     assert "Outside the bands: s / allegro under light=strong (-20.0); s / allegro under physics=mild (-50.0)." in md
+
+
+def test_failed_episodes_are_told_apart_by_where_they_ended():
+    """A failure is classified from the ground-truth hold probe: never reached, never held,
+    slipped, stalled part-way, pushed back; `opend score` counts them per kind for agents' runs."""
+    from opend_mj.evaluation.grading import episode_ending
+    from opend_mj.evaluation.scoring import report_markdown
+
+    far = {"first_held": None, "last_held": None, "steps": 600, "peak_ratio": 0.0}
+    assert episode_ending(True, 0.4, 0.0, far) is None
+    assert episode_ending(False, 0.0, 0.08, far) == "never_reached"
+    assert episode_ending(False, 0.0, 0.01, far) == "never_held"  # got to the handle, touched nothing
+    touched = {"first_held": 100, "last_held": 599, "steps": 600, "peak_ratio": 0.01}
+    assert episode_ending(False, 0.01, 0.0, touched) == "never_held"  # on it, never moved it
+    held = {"first_held": 100, "last_held": 599, "steps": 600, "peak_ratio": 0.12}
+    assert episode_ending(False, 0.12, 0.0, held) == "stalled"
+    assert episode_ending(False, 0.12, 0.0, {**held, "last_held": 300}) == "slipped"
+    assert episode_ending(False, 0.02, 0.0, {**held, "last_held": 300}) == "pushed_back"
+    records = [{"hand": "allegro", "solver": "bc", "split": "test", "target_type": "door", "success": False,
+                "open_ratio": 0.02, "ending": "pushed_back"},
+               {"hand": "allegro", "solver": "bc", "split": "test", "target_type": "door", "success": False,
+                "open_ratio": 0.0, "ending": "never_held"},
+               {"hand": "allegro", "solver": "bc", "split": "test", "target_type": "drawer", "success": True,
+                "open_ratio": 0.5, "ending": None}]
+    table = report_markdown(records)
+    assert "| allegro | bc | test | door | 2 | 2 | 0 | 1 | 0 | 0 | 1 |" in table
+    assert "| allegro | bc | test | drawer | 1 | 0 | 0 | 0 | 0 | 0 | 0 |" in table
+    planner = [{k: v for k, v in r.items() if k != "ending"} for r in records]
+    assert "Where failed episodes ended" not in report_markdown(planner)

@@ -35,3 +35,35 @@ def failure_stage(success: bool, range_ratio: float, site_to_handle: float, box=
     if range_ratio < GRASP_MISS:
         return "grasp"
     return "pull"
+
+
+#: Where a failed episode ended (:func:`episode_ending`), in the order an episode gets there.
+ENDINGS = ("never_reached", "never_held", "slipped", "stalled", "pushed_back")
+#: A part that had opened by this much and ends below half of it was pushed back (open ratio).
+PUSHED_BACK_FROM = 0.05
+#: The hand still on the part within this many control steps of the end holds it (0.5 s at 60 Hz).
+HELD_AT_END = 30
+
+
+def episode_ending(success: bool, open_ratio: float, closest: float, hold: dict) -> str | None:
+    """Where a failed episode ended, from ground truth (for the tables only): ``never_reached`` (the
+    hand never came within ``APPROACH_MISS`` of the handle nor touched the part), ``never_held`` (it
+    got there but its open ratio never reached ``GRASP_MISS``), ``pushed_back`` (the part had
+    opened ``PUSHED_BACK_FROM`` or more and ends below half of its peak), ``slipped`` (it moved the
+    part and was off it for the last ``HELD_AT_END`` steps), ``stalled`` (on the part to the end,
+    short of success); None for a success. ``closest``: the least distance (m) of the grasp site or
+    the hand's gripping surfaces to the handle; ``hold``: `probes.HoldProbe.summary`."""
+    if success:
+        return None
+    touched = hold.get("first_held") is not None
+    peak = float(hold.get("peak_ratio", 0.0))
+    if closest > APPROACH_MISS and not touched:
+        return "never_reached"
+    if peak < GRASP_MISS or not touched:
+        return "never_held"
+    if peak >= PUSHED_BACK_FROM and open_ratio < 0.5 * peak:
+        return "pushed_back"
+    last = hold.get("last_held")
+    if last is None or hold.get("steps", 0) - 1 - last > HELD_AT_END:
+        return "slipped"
+    return "stalled"

@@ -1,4 +1,5 @@
-"""Ground-truth probes that run beside the planner for labelling only: contact depth and video."""
+"""Ground-truth probes that run beside the planner or an agent, for labelling only: contact depth,
+how close the hand came to the handle, whether it held the instructed part, and video."""
 
 from __future__ import annotations
 
@@ -125,3 +126,53 @@ class HandReach:
                 if dist < best:
                     best = dist
         return float(best)
+
+
+class HoldProbe:
+    """Whether the hand is on the instructed part, step by step (ground truth, for labelling only):
+    any contact between a hand geom and a geom of the body the target joint moves (its front, its
+    handle), and the part's open ratio. Read at the end of each control step; :meth:`summary` gives
+    what :func:`opend_mj.evaluation.grading.episode_ending` classifies."""
+
+    def __init__(self, task, physics):
+        m = physics.model.ptr
+        hand_bodies = {int(b) for b in physics.bind(task.hand.mjcf_model.find_all("body")).element_id}
+        joint = int(physics.bind(task.cabinet.mjcf_model.find("joint", task.target.joint)).element_id)
+        part = int(m.jnt_bodyid[joint])
+        moving = {part} | {b for b in range(m.nbody) if self._descends(m, b, part)}
+        self._hand_geom = np.isin(m.geom_bodyid, sorted(hand_bodies))
+        self._part_geom = np.isin(m.geom_bodyid, sorted(moving))
+        self._d = physics.data.ptr
+        self._task, self._physics = task, physics
+        self.steps = 0
+        self.held_steps = 0  # steps with the hand on the part
+        self.first_held: int | None = None  # step of the first contact
+        self.last_held: int | None = None  # step of the latest contact
+        self.peak_ratio = 0.0  # the highest open ratio reached
+
+    @staticmethod
+    def _descends(m, body: int, ancestor: int) -> bool:
+        while body > 0:
+            body = int(m.body_parentid[body])
+            if body == ancestor:
+                return True
+        return False
+
+    def __call__(self) -> None:
+        d = self._d
+        on = False
+        if d.ncon:
+            g1, g2 = d.contact.geom1[:d.ncon], d.contact.geom2[:d.ncon]
+            on = bool(np.any((self._hand_geom[g1] & self._part_geom[g2]) | (self._hand_geom[g2] & self._part_geom[g1])))
+        if on:
+            self.held_steps += 1
+            self.last_held = self.steps
+            if self.first_held is None:
+                self.first_held = self.steps
+        self.peak_ratio = max(self.peak_ratio, float(self._task.open_ratio(self._physics)))
+        self.steps += 1
+
+    def summary(self) -> dict:
+        """``held_steps``, ``first_held`` / ``last_held`` (steps, None where never), ``steps``, ``peak_ratio``."""
+        return {"held_steps": self.held_steps, "first_held": self.first_held, "last_held": self.last_held,
+                "steps": self.steps, "peak_ratio": round(self.peak_ratio, 4)}

@@ -242,6 +242,31 @@ def _episodes_with(records: list[dict], field: str, title: str, column: str, onl
     return lines + [""]
 
 
+def endings_table(records: list[dict]) -> list[str]:
+    """A table section: per (hand, agent, split, kind), where the failed episodes of the records that
+    carry it (``ending``, agents' runs: `grading.episode_ending`) ended."""
+    from opend_mj.evaluation.grading import ENDINGS
+
+    lines = ["## Where failed episodes ended (agents; per kind)", "",
+             "Never reached: the hand never came within 2 cm of the handle; never held: it never moved the part "
+             "3 % open; slipped: it moved the part and was off it for the last 0.5 s; stalled: on the part to the "
+             "end, short of 20 %; pushed back: the part had opened 5 % or more and ends below half of that.", "",
+             "| hand | agent | split | kind | episodes | failures | " + " | ".join(e.replace("_", " ") for e in ENDINGS)
+             + " |", "|" + "---|" * (6 + len(ENDINGS))]
+    for (hand, solver), recs in groups(records).items():
+        recs = [r for r in recs if "ending" in r]
+        for split in SPLITS:
+            for kind in ("drawer", "door"):
+                sel = [r for r in recs if r.get("split") == split and _kind(r) == kind]
+                if not sel:
+                    continue
+                fails = [r for r in sel if not _ok(r, 0.2)]
+                c = Counter(r.get("ending") for r in fails)
+                lines.append(f"| {hand} | {solver} | {split} | {kind} | {len(sel)} | {len(fails)} | "
+                             + " | ".join(str(c.get(e, 0)) for e in ENDINGS) + " |")
+    return lines + [""]
+
+
 def report_markdown(records: list[dict]) -> str:
     lines = [f"# Results ({len(records)} episodes)", ""]
     lines.append("## Ranking (open ratio > 20 %; by test overall, then train overall)")
@@ -307,6 +332,8 @@ def report_markdown(records: list[dict]) -> str:
             lines.append(f"| {hand} | {solver} | {split} | {len(sel)} | {sum(n_re) / len(sel):.2f} | {len(again)} | "
                          f"{sum(_ok(r, 0.2) for r in again)} | {len(pushed)} ({sum(_ok(r, 0.2) for r in pushed)}) |")
     lines.append("")
+    if any(r.get("ending") for r in records):
+        lines += endings_table(records)
     lines += _episodes_with(records, "others_moved", "Wrong targets opened", "with another target moved")
     if any(r.get("wrong_kind") for r in records):
         lines += _episodes_with(records, "wrong_kind", "Handles given up because they moved as the other kind "
