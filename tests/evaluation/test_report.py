@@ -102,7 +102,7 @@ def _plain(text: str) -> str:
 
 def test_report_reads_every_hands_bc_records(tmp_path):
     """The behaviour-cloning columns read one records file per hand (results/bc/<hand>_shipped_test.jsonl)
-    and the real aggregates results/real/bc_all.json."""
+    and one real aggregate per hand, results/real/bc_<hand>_all.json."""
     results = tmp_path / "results"
     (results / "bc").mkdir(parents=True)
     (results / "real").mkdir()
@@ -111,11 +111,12 @@ def test_report_reads_every_hands_bc_records(tmp_path):
     for name, records in (("allegro_shipped_test.jsonl", bc), ("shadow_shipped_test.jsonl", shadow),
                           ("allegro_n50_test.jsonl", bc[:1])):   # not a shipped checkpoint's: not read
         (results / "bc" / name).write_text("".join(json.dumps(r) + "\n" for r in records))
-    write_summary(bc[1:3], results / "real" / "bc_all.json")
+    write_summary(bc[1:3], results / "real" / "bc_allegro_all.json")
+    write_summary(shadow[1:], results / "real" / "bc_shadow_all.json")
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")]
             for line in main_table(results).splitlines()[2:]}
     assert [_plain(c) for c in rows["Allegro"][7:9]] == ["50.0 / 25.0", "50.0 / 0.0"]
-    assert [_plain(c) for c in rows["Shadow"][7:9]] == ["100.0 / 50.0", "- / -"]
+    assert [_plain(c) for c in rows["Shadow"][7:9]] == ["100.0 / 50.0", "100.0 / 0.0"]
     assert rows["Franka gripper"][7] == "- / -"
     page = write_report(results, tmp_path / "results.md").read_text()
     assert "## Behaviour cloning" in page and "results/bc/HAND_shipped_test.jsonl" in page

@@ -100,7 +100,7 @@ class ResultSet:
     solver: str
     title: str
     generated: str  # results/<name>.jsonl (records); a glob pattern reads every file it matches
-    real: str  # results/real/<name>.json (aggregates)
+    real: str  # results/real/<name>.json (aggregates); a glob pattern reads every file it matches
     command: str
     #: how the real records were made; default: `make eval-real SOLVER=<solver>`
     real_command: str = ""
@@ -113,12 +113,12 @@ RESULT_SETS = (
               "... --solver cliport"),
     ResultSet("fasterrcnn", "Faster R-CNN", "fasterrcnn_test.jsonl", "fasterrcnn_all.json",
               "... --solver fasterrcnn"),
-    # the shipped behaviour-cloning checkpoints (checkpoints/bc_<hand>.pt), one records file per hand
-    ResultSet("bc-fasterrcnn", "Behaviour cloning", "bc/*_shipped_test.jsonl", "bc_all.json",
+    # the shipped behaviour-cloning checkpoints (checkpoints/bc_<hand>.pt), one file per hand on both
+    # sides: each hand's policy is retrained on its own
+    ResultSet("bc-fasterrcnn", "Behaviour cloning", "bc/*_shipped_test.jsonl", "bc_*_all.json",
               "opend run --policy bc --hand HAND --split test",
-              "opend run --policy bc --hand franka --hand allegro --hand shadow --hand skeleton --split all "
-              "--cabinets build/opend-train --workers 2 --out build/real-results/bc_real.jsonl` then "
-              "`opend score build/real-results/bc_real.jsonl"),
+              "opend run --policy bc --hand HAND --split all --cabinets build/opend-train --workers 2 "
+              "--out build/real-results/bc_HAND_real.jsonl` then `opend score build/real-results/bc_HAND_real.jsonl"),
 )
 #: Generated-split conditions reported below the main table: (file, what it varies).
 CONDITIONS = (
@@ -150,10 +150,18 @@ def _load_generated(path: Path) -> dict:
 
 
 def _load_real(path: Path) -> tuple[dict, dict]:
-    if not path.is_file():
+    """(scores, the first file's payload) of one real aggregate, or of every file a glob pattern in
+    its name matches (their scores merged by solver and hand)."""
+    paths = sorted(path.parent.glob(path.name)) if any(c in path.name for c in "*?[") else [path]
+    paths = [p for p in paths if p.is_file()]
+    if not paths:
         return {}, {}
-    payload = json.loads(path.read_text())
-    return payload["scores"], payload
+    payloads = [json.loads(p.read_text()) for p in paths]
+    scores: dict = {}
+    for payload in payloads:
+        for solver, hands in payload["scores"].items():
+            scores.setdefault(solver, {}).update(hands)
+    return scores, payloads[0]
 
 
 def _pair(scores: dict, solver: str, hand: str) -> str:
@@ -224,7 +232,8 @@ def results_markdown(results_dir: Path) -> str:
                     f"{meta.get('excluded_targets', 0)} of them excluded by the build's feasibility check and "
                     f"counted as failures; "
                     f"`{rs.real_command or f'make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl'} "
-                    f"--summary results/real/{rs.real} --manifest build/opend-train/manifest.json`):", ""]
+                    f"--summary results/real/{rs.real.replace('*', 'HAND')} --manifest build/opend-train/manifest.json`):",
+                    ""]
             out += _detail_table(real, rs.solver) + [""]
     rows = []
     for name, title in CONDITIONS:
