@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real robustness robustness-hands robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-hands robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos bench-agents clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -226,3 +226,9 @@ bench-env: install
 ## (also in `make bench`).
 bench-demos: install
 	$(BIN)/python tools/bench_demos.py --cabinets $(CABINETS) --write BENCHMARKS.md
+
+## The agent channel (`opend run --policy`: observation out, action back over a pipe) per step beside the
+## physics step, and the BC policy's act apart and in-process; the section is written into BENCHMARKS.md
+## (also in `make bench`).
+bench-agents: install
+	$(BIN)/python tools/bench_agent_channel.py --cabinets $(CABINETS) --write BENCHMARKS.md

@@ -13,8 +13,10 @@ Sections (each a subprocess, so that its peak memory can be read):
             (interleaved chunks, wall and CPU time)
   demos   - tools/bench_demos.py: demonstrations recorded per minute (1 and 2 workers), bytes per
             demonstration, training samples per second and the peak memory of training
+  agents  - tools/bench_agent_channel.py: the agent channel's round trip per step beside the physics
+            step, and the BC policy's act in its own process and in the simulator's
 
-    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs,demos] [--out BENCHMARKS.md]
+    python tools/bench.py [--quick] [--sections assets,hands,task,episodes,envs,demos,agents] [--out BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -148,7 +150,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=ROOT / "BENCHMARKS.md")
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
-    parser.add_argument("--sections", default="assets,hands,task,episodes,envs,demos")
+    parser.add_argument("--sections", default="assets,hands,task,episodes,envs,demos,agents")
     parser.add_argument("--quick", action="store_true", help="smaller counts (a few minutes in all)")
     args = parser.parse_args()
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -208,6 +210,10 @@ def main() -> None:
         out, secs, mem = _run(["tools/bench_demos.py", "--cabinets", str(args.cabinets),
                                "--episodes", "8" if quick else "24"])
         body += [out.strip(), ""]  # the section as tools/bench_demos.py prints it
+    if "agents" in sections:
+        out, secs, mem = _run(["tools/bench_agent_channel.py", "--cabinets", str(args.cabinets),
+                               "--steps", "500" if quick else "2000"])
+        body += [out.strip(), ""]  # the section as tools/bench_agent_channel.py prints it
     load_after = os.getloadavg()
     header.insert(-1, f"Load average (1 min) when the run started / ended: {load_before[0]:.2f} / {load_after[0]:.2f} "
                       f"on {os.cpu_count()} cores: above about 1, other work shared the cores and the worker "

@@ -1,6 +1,7 @@
 """Agents that misbehave are contained: one whose `act` never returns is ended by the per-episode
-wall-clock limit (`--episode-timeout`), one that kills its worker process costs that episode only;
-the run goes on and records each with its reason. Bad input to any command is answered in one line."""
+wall-clock limit (`--episode-timeout`), one that ends its process costs that episode only (in its own
+process, the default, and in the worker's with --agent-in-process); the run goes on and records each
+with its reason. Bad input to any command is answered in one line."""
 
 from __future__ import annotations
 
@@ -82,15 +83,22 @@ def test_an_agent_that_hangs_is_ended_by_the_episode_timeout(small_dataset, agen
 
 
 @pytest.mark.slow
-def test_an_agent_that_kills_its_worker_costs_that_episode_only(small_dataset, agent, instructions, tmp_path):
+@pytest.mark.parametrize("isolation, kind, words", [
+    ("process", "agent_died", "the agent process died (exit status 3)"),
+    ("in-process", "worker_died", "died"),
+])
+def test_an_agent_that_ends_its_process_costs_that_episode_only(small_dataset, agent, instructions, tmp_path,
+                                                                 isolation, kind, words):
     out = tmp_path / "crash.jsonl"
-    result = _run(small_dataset, out, agent, instructions[0], "crash")
+    extra = ("--agent-in-process",) if isolation == "in-process" else ()
+    result = _run(small_dataset, out, agent, instructions[0], "crash", *extra)
     assert result.exit_code == 0, result.output
     records = load_results(out)
     assert len(records) == 3
     crashed = [r for r in records if r.get("error")]
     assert len(crashed) == 1 and crashed[0]["instruction"] == instructions[0], crashed
-    assert crashed[0]["error_kind"] == "worker_died" and "died" in crashed[0]["error_reason"]
+    assert crashed[0]["error_kind"] == kind and words in crashed[0]["error_reason"], crashed[0]["error_reason"]
+    assert all(r["agent_isolation"] == isolation for r in records)
     assert all("error" not in r and r["agent_stopped"] for r in records if r is not crashed[0])
 
 

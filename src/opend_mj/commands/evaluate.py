@@ -92,6 +92,13 @@ def _check_cabinets(ctx, param, value):
                    "(checkpoints/bc_<hand>.pt in the current folder, else the shipped one; docs/demonstrations.md).")
 @click.option("--policy-arg", "policy_args", multiple=True, metavar="KEY=VALUE",
               help="Constructor argument of the --policy agent (repeatable; values parsed as JSON where they can be).")
+@click.option("--agent-in-process", "agent_in_process", is_flag=True, default=False,
+              help="Run the --policy agent in the simulator's process instead of a process of its own "
+                   "(for debugging: it can then reach the simulator; every record and `opend score` say so).")
+@click.option("--agent-memory", "agent_memory", default=None, metavar="SIZE",
+              help="Address-space limit of the --policy agent's process, e.g. 4G, 512M; 0: none [half the "
+                   "machine's memory]. An episode whose agent exceeds it is recorded as an error "
+                   "(error_kind agent_memory) and the run goes on.")
 @click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
               help="Run under a perturbation (repeatable; axes camera_pose, camera_fov, light, texture, "
                    "distractors, physics, depth_noise, instruction; levels mild, strong; drawn per scene "
@@ -104,7 +111,8 @@ def _check_cabinets(ctx, param, value):
 @click.pass_context
 def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir, limit, targets, kind, seeds, video_dir,
         light_scale,
-        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, perturb, wait, episode_timeout):
+        pull, paraphrase, instruction_file, physics_timestep, policy, policy_args, agent_in_process, agent_memory,
+        perturb, wait, episode_timeout):
     """Run episodes (resumable: episodes already in --out are skipped).
 
     Exit status: 0 when the run finished (error episodes are recorded as lines with `error` and
@@ -124,28 +132,22 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     perturb = _check_perturb(perturb, paraphrase, instruction_file)
     policy_spec, parsed_args = None, ()
     actor = solver  # what acts, as the results' solver column names it: a handle solver or an agent
+    isolation, memory = "process", None
     if policy is not None:
-        from opend_mj.evaluation.agents import (
-            agent_name,
-            load_agent,
-            parse_policy_args,
-            resolve_policy,
-        )
-        from opend_mj.policy.learned.checkpoint_io import CheckpointError
+        from opend_mj.evaluation.agent_process import default_agent_memory, parse_memory
 
         if ctx.get_parameter_source("solver") is not click.core.ParameterSource.DEFAULT:
             raise click.UsageError("--policy and --solver exclude each other (an agent finds the handle itself)")
         try:
-            parsed_args = parse_policy_args(policy_args)
-            target, attr = resolve_policy(policy)
-            policy_spec = f"{target}:{attr}"
-            actor = agent_name(load_agent(policy_spec, parsed_args))
-        except CheckpointError as exc:  # a file refused unread: a failure (exit 1), not a usage error
-            raise click.ClickException(str(exc)) from None
-        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
-            raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
+            memory = default_agent_memory() if agent_memory is None else parse_memory(agent_memory)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), ctx, param_hint="--agent-memory") from None
+        isolation = "in-process" if agent_in_process else "process"
+        policy_spec, parsed_args, actor = _agent_spec(ctx, policy, policy_args, isolation, memory)
     elif policy_args:
         raise click.UsageError("--policy-arg needs --policy")
+    elif agent_in_process or agent_memory is not None:
+        raise click.UsageError("--agent-in-process and --agent-memory need --policy")
     try:
         jobs = [job for seed in dict.fromkeys(seeds)
                 for job in make_jobs(cabinets_dir, hands, actor, split=split, seed=seed, light_scale=light_scale,
@@ -155,7 +157,10 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     except ValueError as exc:
         raise click.BadParameter(str(exc), ctx, param_hint="--target") from None
     if policy_spec is not None:
-        jobs = [dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs]
+        from opend_mj.evaluation.agent_process import with_containment
+
+        jobs = with_containment([dataclasses.replace(j, policy=policy_spec, policy_args=parsed_args) for j in jobs],
+                                isolation, memory)
     if instruction_file is not None:
         jobs = _with_phrasings(jobs, instruction_file, paraphrase)
     _check_scenes(jobs)
@@ -175,6 +180,31 @@ def run(ctx, hands, solver, split, workers, backend, address, out, cabinets_dir,
     if counts["ran"] and counts["errors"] == counts["ran"]:
         click.echo("error: every episode failed to run (see error_reason in the results file)", err=True)
         raise SystemExit(1)
+
+
+def _agent_spec(ctx, policy: str, policy_args, isolation: str, memory: int | None) -> tuple[str, tuple, str]:
+    """(spec, parsed arguments, name) of a --policy agent. Its name is read in an agent process of its
+    own, as the run will hold it (in this process only with --agent-in-process): the process that
+    writes the results never imports an agent that runs apart."""
+    from opend_mj.evaluation.agent_process import AgentFailure, describe_agent
+    from opend_mj.evaluation.agents import agent_name, load_agent, parse_policy_args, resolve_policy
+    from opend_mj.policy.learned.checkpoint_io import CheckpointError
+
+    try:
+        parsed_args = parse_policy_args(policy_args)
+        target, attr = resolve_policy(policy)
+        spec = f"{target}:{attr}"
+        if isolation == "in-process":
+            return spec, parsed_args, agent_name(load_agent(spec, parsed_args))
+        return spec, parsed_args, describe_agent(spec, parsed_args, memory)["name"]
+    except AgentFailure as exc:  # raised in the agent's process: its reason says it
+        if exc.error_kind == "checkpoint":  # a file refused unread: a failure (exit 1), not a usage error
+            raise click.ClickException(str(exc)) from None
+        raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
+    except CheckpointError as exc:  # the same, from an agent loaded here (--agent-in-process)
+        raise click.ClickException(str(exc)) from None
+    except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
+        raise click.BadParameter(f"{policy}: {exc}", ctx, param_hint="--policy") from None
 
 
 class PerturbRefused(click.ClickException):
@@ -428,15 +458,13 @@ def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit,
     if not solvers and not policies:
         raise click.UsageError("give at least one --solver or --policy")
     entries = [(s, None, ()) for s in solvers]
-    for policy in policies:
-        from opend_mj.evaluation.agents import agent_name, load_agent, resolve_policy
+    if policies:
+        from opend_mj.evaluation.agent_process import default_agent_memory, with_containment
 
-        try:
-            target, attr = resolve_policy(policy)
-            spec = f"{target}:{attr}"
-            entries.append((agent_name(load_agent(spec, ())), spec, ()))
-        except Exception as exc:  # noqa: BLE001 (a bad spec, an agent whose constructor fails)
-            raise click.BadParameter(f"{policy}: {exc}", param_hint="--policy") from None
+        memory = default_agent_memory()
+    for policy in policies:
+        spec, args, name = _agent_spec(click.get_current_context(), policy, (), "process", memory)
+        entries.append((name, spec, args))
     paths = []
     plans = []
     for name, policy, args in entries:
@@ -445,8 +473,9 @@ def robustness(solvers, policies, hands, split, cabinets_dir, axes, seed, limit,
         if table_only:
             continue
         try:  # every scene of every entry checked before any episode runs
-            plans.append((path, robustness_jobs(cabinets_dir, hands, name, split=split, seed=seed, limit=limit,
-                                                axes=axes, policy=policy, policy_args=args)))
+            jobs = robustness_jobs(cabinets_dir, hands, name, split=split, seed=seed, limit=limit, axes=axes,
+                                   policy=policy, policy_args=args)
+            plans.append((path, with_containment(jobs, "process", memory) if policy else jobs))
         except PerturbError as exc:
             raise PerturbRefused(str(exc)) from None
     for path, jobs in plans:

@@ -10,22 +10,28 @@ closest the grasp site and the hand's gripping surfaces came to the handle).
 
 An agent is named ``module:Class``, ``path/to/file.py:Class``, ``path/to/file.py`` (its class
 ``Agent``) or by a built-in name (`BUILTIN_POLICIES`: ``bc``, the behaviour-cloning policy);
-``--policy-arg key=value`` are passed to the constructor. One agent instance per worker
-process and spec, reset at every episode.
+``--policy-arg key=value`` are passed to the constructor. The agent runs in a process of its own
+that holds no simulator (`evaluation.agent_process`: observation in, action out, over a pipe): one
+per worker process and spec, reset at every episode, started afresh after an episode it failed
+(an error, its memory limit, its death, the wall-clock limit). With ``--agent-in-process`` it runs
+in the worker, beside the simulator (for debugging; every record says so).
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import json
-import sys
 import zlib
-from pathlib import Path
 
 import numpy as np
 
-from opend_mj.evaluation.episode import EpisodeJob
+from opend_mj.evaluation.agent_loader import BUILTIN_POLICIES, load_agent, parse_policy_args, resolve_policy
+from opend_mj.evaluation.agent_process import (
+    CONTAINMENT_FIELDS,
+    ISOLATION_IN_PROCESS,
+    AgentProcess,
+    contained_agent,
+    discard,
+)
+from opend_mj.evaluation.episode import EPISODE_FIELDS, EpisodeJob
 from opend_mj.evaluation.grading import failure_stage
 from opend_mj.evaluation.probes import HandReach, PenetrationProbe, VideoRecorder
 from opend_mj.evaluation.runner import (
@@ -37,78 +43,9 @@ from opend_mj.policy.agents import EpisodeInfo, agent_control, agent_images, age
 #: The protocol's time limit for an agent (s of simulated time): TaskConfig's default episode length.
 PROTOCOL_TIME_LIMIT = 15.0
 
-_LOADED: dict[tuple, object] = {}
-
-#: Agents shipped with the package, by short name (``opend run --policy bc``).
-BUILTIN_POLICIES = {"bc": "opend_mj.policy.bc:BCAgent"}
-
-
-def parse_policy_args(items) -> tuple[tuple[str, object], ...]:
-    """``("k=v", ...)`` -> ``(("k", v), ...)``; a value is JSON where it parses (numbers, true, lists)."""
-    out = []
-    for item in items or ():
-        key, sep, value = str(item).partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"policy argument {item!r} is not key=value")
-        try:
-            parsed = json.loads(value)
-        except json.JSONDecodeError:
-            parsed = value
-        out.append((key.strip(), parsed))
-    return tuple(out)
-
-
-def resolve_policy(spec: str) -> tuple[str, str]:
-    """``(module or absolute file path, attribute)`` of a policy spec; raises ValueError if not found."""
-    spec = BUILTIN_POLICIES.get(spec, spec)
-    target, sep, attr = spec.rpartition(":")
-    if not sep:
-        target, attr = spec, ""
-    if target.endswith(".py") or Path(target).is_file():
-        path = Path(target).expanduser().resolve()
-        if not path.is_file():
-            raise ValueError(f"policy file {target} not found")
-        return str(path), attr or "Agent"
-    if not attr:
-        raise ValueError(f"policy {spec!r}: name a class, as module:Class or path/to/file.py:Class")
-    return target, attr
-
-
-def _import(target: str):
-    if target.endswith(".py"):
-        name = f"opend_policy_{zlib.crc32(target.encode()):08x}"
-        if name in sys.modules:
-            return sys.modules[name]
-        spec = importlib.util.spec_from_file_location(name, target)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-        return module
-    return importlib.import_module(target)
-
-
-def load_agent(spec: str, args: tuple = ()):
-    """The agent a spec names, made with ``args`` (cached per process)."""
-    key = (spec, args)
-    agent = _LOADED.get(key)
-    if agent is None:
-        target, attr = resolve_policy(spec)
-        try:
-            module = _import(target)
-        except ImportError as exc:
-            raise ValueError(f"policy {spec!r}: cannot import {target} ({exc})") from exc
-        factory = getattr(module, attr, None)
-        if factory is None:
-            raise ValueError(f"policy {spec!r}: {target} has no {attr!r}")
-        # a class or a factory function is called with the arguments; an instance is used as it is
-        is_factory = isinstance(factory, type) or (callable(factory) and not hasattr(factory, "act"))
-        agent = factory(**dict(args)) if is_factory else factory
-        if not callable(getattr(agent, "act", None)):
-            raise ValueError(f"policy {spec!r}: {attr} has no act(obs) method")
-        agent_control(agent)
-        agent_images(agent)
-        _LOADED[key] = agent
-    return agent
+#: Record fields an agent's own extra fields (``episode_info()``) may not set: who ran, what, how.
+RESERVED_FIELDS = frozenset({f.name for f in EPISODE_FIELDS} | set(CONTAINMENT_FIELDS)
+                            | {"target_type", "instruction", "wall_seconds", "error", "error_reason", "error_kind"})
 
 
 def episode_seed(job: EpisodeJob) -> int:
@@ -126,17 +63,32 @@ def run_group(jobs, episode_timeout: float | None = None) -> list[dict]:
 
 def run_agent_group(jobs, episode_timeout: float | None = None) -> list[dict]:
     """Like `runner.run_episode_group` (the same scene sharing and fresh scene after a failure), with
-    the agent of the jobs' ``policy`` acting."""
+    the agent of the jobs' ``policy`` acting: in an agent process of its own (`evaluation.agent_process`,
+    one per worker and spec, kept across episodes), or in this process for ``agent_isolation ==
+    "in-process"``."""
     return run_episode_group(jobs, episode=_agent_episode, timeout=episode_timeout)
 
 
 def _agent_episode(job: EpisodeJob, env) -> dict:
     env.task.set_target(job.joint, instruction_for(job))
-    return run_agent_episode(job, env, load_agent(job.policy, job.policy_args))
+    if job.agent_isolation == ISOLATION_IN_PROCESS:
+        return run_agent_episode(job, env, load_agent(job.policy, job.policy_args))
+    agent = contained_agent(job.policy, job.policy_args, job.agent_memory)
+    done = False
+    try:
+        record = run_agent_episode(job, env, agent)
+        done = True
+        return record
+    finally:
+        if not done:  # it raised, died, or its episode ran out of time: the next episode gets a fresh one
+            discard(agent)
 
 
 def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
-    """One episode of ``agent`` on ``env`` (a scene made by `runner.make_episode_env` for ``job``)."""
+    """One episode of ``agent`` on ``env`` (a scene made by `runner.make_episode_env` for ``job``).
+
+    ``agent``: an agent object in this process, or an `AgentProcess` (the same interface across its
+    channel). Its extra record fields (``episode_info()``) never replace the record's own."""
     from opend_mj.sim.envs import ActionAdapter, SceneReader
 
     task = env.task
@@ -205,6 +157,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         if video:
             video.close()
     extra = agent.episode_info() if callable(getattr(agent, "episode_info", None)) else {}
+    extra = dict(extra or {})
     outcome = task.outcome(physics) if not diverged else None
     values = {}
     if outcome is not None:
@@ -216,7 +169,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         values = {"success": False, "open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
     else:
         failed = failure_stage(outcome.success, outcome.range_ratio, min(closest, hand_closest), check_locate=False)
-    return {
+    record = {
         "cabinet_dir": job.cabinet_dir,
         "target_type": task.target.kind,
         "instruction": task.instruction,
@@ -233,9 +186,9 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         "max_penetration_mm": round(penetration.deepest * 1000, 2),
         "physics_warnings": list(task.physics_warnings),
         "video": str(video.path) if video else None,
-        **extra,
     }
+    return {**record, **{str(k): v for k, v in extra.items() if k not in record and k not in RESERVED_FIELDS}}
 
 
-__all__ = ["BUILTIN_POLICIES", "PROTOCOL_TIME_LIMIT", "agent_name", "load_agent", "parse_policy_args", "resolve_policy",
-           "run_agent_episode", "run_agent_group", "run_group"]
+__all__ = ["BUILTIN_POLICIES", "PROTOCOL_TIME_LIMIT", "AgentProcess", "agent_name", "load_agent", "parse_policy_args",
+           "resolve_policy", "run_agent_episode", "run_agent_group", "run_group"]

@@ -95,6 +95,12 @@ class EpisodeJob:
     #: arguments ((key, value), ...). Not part of the key: the agent's name is the ``solver``.
     policy: str | None = None
     policy_args: tuple = ()
+    #: How the agent runs (`evaluation.agent_process`): "process" (its own, apart from the simulator)
+    #: or "in-process" (`opend run --agent-in-process`, for debugging); its address-space limit in
+    #: bytes (None: none); the sha256 of its source file (None: computed where the record is made).
+    agent_isolation: str = "process"
+    agent_memory: int | None = None
+    agent_sha256: str | None = None
     #: A perturbation (`sim.perturb`, canonical ``AXIS=LEVEL[,AXIS=LEVEL]``), drawn from the scene's
     #: seed; None: the nominal scene.
     perturb: str | None = None
@@ -131,11 +137,16 @@ def scene_seed(job: EpisodeJob) -> int:
 
 def record_fields(job: EpisodeJob) -> dict:
     """The fields a record of ``job`` starts with: its identity, split, and the target's type and
-    instruction from the manifest (so even an episode that could not run is scored in its column)."""
+    instruction from the manifest (so even an episode that could not run is scored in its column);
+    for an agent's episode, how the agent was run (`agent_process.CONTAINMENT_FIELDS`)."""
     base = {f.name: getattr(job, f.name) for f in EPISODE_FIELDS if f.shown(getattr(job, f.name))}
     for k in ("target_type", "instruction"):
         if getattr(job, k) is not None:
             base[k] = getattr(job, k)
+    if job.policy:  # how the agent was contained, in every record of its episodes (errors too)
+        from opend_mj.evaluation.agent_process import containment_fields
+
+        base.update(containment_fields(job))
     return base
 
 

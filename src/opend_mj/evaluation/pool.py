@@ -4,9 +4,12 @@ Reliability: an episode never stops the run. A cabinet whose files are missing o
 cheaply in the parent: ``cabinet.json`` parses, ``cabinet.xml`` is well-formed XML; deeper faults
 surface in the worker as ``CabinetError``) gives error records with ``error_reason`` naming the file;
 an episode past its wall-clock limit (``episode_timeout``) gives an error record of kind ``timeout``.
-Agents (``EpisodeJob.policy``) always run in worker processes, even with one worker: a worker that
-dies (an agent that calls ``os._exit`` or crashes the interpreter) costs its episode only, since the
-episodes of its group are run again one by one. Error records count as done on resume (delete their
+Agents (``EpisodeJob.policy``) run in agent processes of their own, started by the worker that
+holds the simulator (`evaluation.agent_process`); an agent process that dies costs its episode only.
+Agent runs use worker processes even with one worker, so that a worker that dies (or an agent run
+``--agent-in-process`` that calls ``os._exit``) costs its episode only: the episodes of its group
+are run again one by one. This process, which writes the records, makes itself non-dumpable for an
+agent run (`agent_process.make_undumpable`). Error records count as done on resume (delete their
 lines to retry them).
 """
 
@@ -15,6 +18,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
+from opend_mj.evaluation.agent_process import ISOLATION_IN_PROCESS, make_undumpable
 from opend_mj.evaluation.agents import run_group
 from opend_mj.evaluation.deadline import DEFAULT_EPISODE_TIMEOUT
 from opend_mj.evaluation.episode import EpisodeJob, episode_key
@@ -113,6 +117,8 @@ def _run_jobs(jobs, out, workers, progress, backend, address, executor, sort, ep
                 if progress:
                     bar.write(f"skipped {j.cabinet}/{j.joint}: {error_reason(exc)}")
         if runnable:
+            if any(j.policy and j.agent_isolation != ISOLATION_IN_PROCESS for j in runnable):
+                make_undumpable()  # no agent process reads or writes the records in this one's memory
             if executor is not None:
                 ex = executor
             elif backend == "local" and workers <= 1 and any(j.policy for j in runnable):

@@ -7,7 +7,9 @@ Ground truth is used here only to label results (failure stage, success); the pl
 
 Reliability: an episode never raises. An episode that runs past its wall-clock limit
 (``episode_timeout``, `evaluation.deadline`) gives an error record of kind ``timeout``. A task that raises (e.g. a non-finite action: ``ValueError: action has non-finite values``)
-gives an error record; a MuJoCo instability (BADQACC/BADQPOS/BADQVEL, or NaN state) ends the episode
+gives an error record; an agent in its own process that fails (`agent_process.AgentFailure`) gives
+one of its kind: ``exception`` (it raised), ``agent_memory`` (past ``--agent-memory``),
+``agent_died`` (its process ended), ``protocol`` (a malformed message); a MuJoCo instability (BADQACC/BADQPOS/BADQVEL, or NaN state) ends the episode
 as a failure with ``failed_stage = "physics"`` and the warnings in ``physics_warnings``. Error
 records count as done on resume (delete their lines to retry them).
 """
@@ -81,6 +83,8 @@ def error_reason(exc: BaseException | str) -> str:
     if isinstance(exc, str):  # a traceback's text: its last non-empty line
         lines = [ln for ln in exc.strip().splitlines() if ln.strip()]
         return lines[-1].strip() if lines else "unknown error"
+    if isinstance(getattr(exc, "error_kind", None), str) and str(exc):  # an agent's failure says it in full
+        return str(exc).splitlines()[0]
     return f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
 
 
@@ -88,6 +92,8 @@ def error_record(job: EpisodeJob, exc: BaseException | str) -> dict:
     """The record of an episode that could not run: ``error`` (traceback) and ``error_reason`` (one line)."""
     if isinstance(exc, str):
         tb = exc
+    elif getattr(exc, "remote_traceback", None):  # an agent's error, with its own process's traceback
+        tb = exc.remote_traceback
     else:
         tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
         if not tb.startswith("Traceback"):
@@ -103,6 +109,8 @@ def _error_kind(exc) -> str:
         return "cabinet"
     if isinstance(exc, EpisodeTimeout):
         return "timeout"
+    if isinstance(getattr(exc, "error_kind", None), str):  # `agent_process.AgentFailure`: its own kind
+        return exc.error_kind
     if isinstance(exc, str) and "BrokenProcessPool" in exc:
         return "worker_died"
     if isinstance(exc, ValueError) and "action" in str(exc):

@@ -4,7 +4,8 @@ Success is recomputed from ``open_ratio`` at thresholds 20 / 50 / 90 % (20 % is 
 paper's), and from the fraction of the joint range opened at 75 % (ManiSkill3's criterion for its
 OpenCabinet tasks: ``range_ratio``, or the record's raw ``joint_value`` and ``joint_range``; a record
 with neither, written before they were recorded, shows n/a). Error records (``"error"`` in the line)
-count as failures at stage ``error``. When several files hold the same episode key, the last one wins.
+count as failures at stage ``error``. When several files hold the same episode key, the last one wins
+(an agent's episode run ``--agent-in-process`` is an entry of its own: `entry_name`).
 
 Files compared with each other should hold the same episodes: `episode_set_warnings` names each pair
 that does not (an episode here is its key without the solver or agent: `task_key`), and
@@ -102,7 +103,8 @@ def merge_runs(runs: list[tuple[Path, list[dict]]], common: bool = False) -> lis
     for _, records in runs:
         for r in records:
             if shared is None or task_key(r) in shared:
-                merged[episode_key(r)] = r
+                # an in-process agent's episode never replaces one run apart
+                merged[(*episode_key(r), r.get("agent_isolation") == "in-process")] = r
     return list(merged.values())
 
 
@@ -150,8 +152,38 @@ def _kind(r: dict) -> str | None:
 
 def entry_name(r: dict) -> str:
     """The solver / agent column of a record: its solver, with its perturbation where it has one
-    (``oracle [light=strong]``), so perturbed and nominal runs never pool."""
-    return f"{r['solver']} [{r['perturb']}]" if r.get("perturb") else r["solver"]
+    (``oracle [light=strong]``), so perturbed and nominal runs never pool; an agent that ran in the
+    simulator's process (``--agent-in-process``, where it could reach the scene) is marked
+    ``(agent in-process)`` and never pools with the same agent run apart."""
+    name = f"{r['solver']} [{r['perturb']}]" if r.get("perturb") else r["solver"]
+    return f"{name} (agent in-process)" if r.get("agent_isolation") == "in-process" else name
+
+
+def containment_lines(records: list[dict]) -> list[str]:
+    """A table section: how the agents were run, per (hand, agent): the isolation, the opend-mj
+    versions, the sha256 of the agent's source and the agent process's memory limit, as their records
+    say ("not recorded" for records written before agents ran apart). Empty without agent records."""
+    rows = []
+    for (hand, name), recs in groups(records).items():
+        agents = [r for r in recs if r.get("policy") or r.get("agent_isolation")]
+        if not agents:
+            continue
+
+        def values(field: str, fmt=str) -> str:
+            seen = sorted({fmt(r[field]) if r.get(field) is not None else "not recorded" for r in agents})
+            return ", ".join(seen)
+
+        memory = values("agent_memory", lambda b: f"{int(b) / (1 << 30):.3g} GiB")
+        rows.append(f"| {hand} | {name} | {len(agents)} | {values('agent_isolation')} | {values('opend_version')} | "
+                    f"{values('agent_sha256', lambda h: str(h)[:12])} | {memory} |")
+    if not rows:
+        return []
+    return ["## How agents were run", "",
+            "process: the agent ran in a process of its own, holding no simulator (observation in, action out); "
+            "in-process: beside the simulator (`--agent-in-process`, for debugging), where it can reach the scene "
+            "and its figures are not the benchmark's. sha256: the first 12 digits of the agent's source file's.", "",
+            "| hand | solver / agent | episodes | agent isolation | opend-mj | agent sha256 | memory limit |",
+            "|---|---|---|---|---|---|---|", *rows, ""]
 
 
 def groups(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
@@ -338,6 +370,7 @@ def report_markdown(records: list[dict]) -> str:
     if any(r.get("wrong_kind") for r in records):
         lines += _episodes_with(records, "wrong_kind", "Handles given up because they moved as the other kind "
                                 "(learned solvers)", "with a handle given up", only_with=True)
+    lines += containment_lines(records)
     lines.append("## Time per episode (mean)")
     lines.append("")
     lines.append("| hand | solver | episodes | sim s | wall s |")
