@@ -346,7 +346,7 @@ class AgentProcess:
                 kind, reason, tb = str(err["kind"]), str(err["reason"]), err.get("traceback")
             except (ValueError, KeyError, TypeError):
                 raise AgentFailure("the agent sent a malformed error message", "protocol") from None
-            raise AgentFailure(reason, kind if kind in ("exception", "agent_memory", "protocol") else "exception",
+            raise AgentFailure(reason, kind if kind in ("exception", "agent_memory", "protocol", "checkpoint") else "exception",
                                tb if isinstance(tb, str) else None)
         if tag not in expected:
             raise AgentFailure(f"the agent answered {tag!r} where {b'/'.join(expected)!r} was expected", "protocol")

@@ -32,8 +32,8 @@ from opend_mj.evaluation.agent_process import (
     discard,
 )
 from opend_mj.evaluation.episode import EPISODE_FIELDS, EpisodeJob
-from opend_mj.evaluation.grading import failure_stage
-from opend_mj.evaluation.probes import HandReach, PenetrationProbe, VideoRecorder
+from opend_mj.evaluation.grading import episode_ending, failure_stage
+from opend_mj.evaluation.probes import HandReach, HoldProbe, PenetrationProbe, VideoRecorder
 from opend_mj.evaluation.runner import (
     instruction_for,
     run_episode_group,
@@ -66,7 +66,14 @@ def run_agent_group(jobs, episode_timeout: float | None = None) -> list[dict]:
     the agent of the jobs' ``policy`` acting: in an agent process of its own (`evaluation.agent_process`,
     one per worker and spec, kept across episodes), or in this process for ``agent_isolation ==
     "in-process"``."""
-    return run_episode_group(jobs, episode=_agent_episode, timeout=episode_timeout)
+    return run_episode_group(jobs, episode=_agent_episode, timeout=episode_timeout, prepare=_start_agent)
+
+
+def _start_agent(job: EpisodeJob) -> None:
+    """The job's agent process, started (or found running) before its episode's wall-clock limit
+    starts: a process start costs seconds on a loaded machine and is not the agent's acting time."""
+    if job.agent_isolation != ISOLATION_IN_PROCESS:
+        contained_agent(job.policy, job.policy_args, job.agent_memory)
 
 
 def _agent_episode(job: EpisodeJob, env) -> dict:
@@ -124,6 +131,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
     closest = reader.probe.distance()
     reach = HandReach(task, physics)
     hand_closest = reach() if closest < reach.span + reach.cap else reach.cap
+    hold = HoldProbe(task, physics)
     steps, stopped, diverged = 0, False, False
     try:
         # before the video's renderer opens (one renderer at a time). The scene is still before the
@@ -142,6 +150,7 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
             ts = env.step(np.asarray(action, dtype=np.float64))
             steps += 1
             penetration()
+            hold()
             if video:
                 video.capture()
             site_distance = reader.probe.distance()
@@ -169,6 +178,9 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         values = {"success": False, "open_ratio": None, "range_ratio": None, "joint_value": None, "others_moved": []}
     else:
         failed = failure_stage(outcome.success, outcome.range_ratio, min(closest, hand_closest), check_locate=False)
+    held = hold.summary()
+    ending = None if outcome is None else episode_ending(outcome.success, outcome.open_ratio,
+                                                         min(closest, hand_closest), held)
     record = {
         "cabinet_dir": job.cabinet_dir,
         "target_type": task.target.kind,
@@ -178,6 +190,8 @@ def run_agent_episode(job: EpisodeJob, env, agent) -> dict:
         "closed_value": task.target.closed,
         **values,
         "failed_stage": failed,
+        "ending": ending,
+        "hold": held,
         "site_to_handle": round(closest, 4),
         "hand_to_handle": round(hand_closest, 4),
         "steps": steps,

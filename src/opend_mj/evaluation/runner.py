@@ -49,17 +49,24 @@ def run_episode(job: EpisodeJob, env=None, episode=None, timeout: float | None =
 
 
 def run_episode_group(jobs: tuple[EpisodeJob, ...] | list[EpisodeJob], episode=None,
-                      timeout: float | None = None) -> list[dict]:
+                      timeout: float | None = None, prepare=None) -> list[dict]:
     """Run episodes that share one `scene_key` on one scene, built once (the unit of work of a run).
 
     Building a scene (room, cabinet, hand, compile) costs about as much as simulating an episode;
     the episodes of one cabinet's targets differ only in the target and the instruction, and each
     starts from a full reset, so their records are the same as with a scene each. ``episode`` and
-    ``timeout`` (each episode's wall-clock limit): as in `run_episode`.
+    ``timeout`` (each episode's wall-clock limit): as in `run_episode`. ``prepare(job)``, where given,
+    runs before each episode outside its wall-clock limit, as the scene's build does (starting an
+    agent's process); what it raises is left for the episode to meet and record.
     """
     records = []
     env = None
     for job in jobs:
+        if prepare is not None:
+            try:
+                prepare(job)
+            except Exception:  # noqa: BLE001 (raised again inside the episode, and recorded there)
+                pass
         if env is None:
             t0 = time.perf_counter()
             try:
