@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
-from opend_mj.language import describe_instruction  # noqa: E402
+from opend_mj.language.onehot import INSTRUCTION_DIM, instruction_onehot  # noqa: E402
 from opend_mj.sim.fast.binding import LAST, NAN, WARNING_BITS  # noqa: E402
 from opend_mj.sim.hands import touch_parts  # noqa: E402
 from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, sparse_reward  # noqa: E402
@@ -58,29 +58,11 @@ OBS_MODES = ("state", "rgb", "depth", "rgbd")
 CONTROLS = ("delta", "absolute")
 INSTRUCTION_MODES = ("onehot", "text")
 
-#: Labels of the instruction one-hot code (Algorithm 1's words; "" = the word is not needed).
-VERTICAL_LABELS = ("", "top", "second top", "middle", "second bottom", "bottom")
-HORIZONTAL_LABELS = ("", "left", "second left", "middle", "second right", "right")
-KIND_LABELS = ("drawer", "door")
-INSTRUCTION_DIM = len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + len(KIND_LABELS)
-
 #: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state:
 #: `PROPRIO_KEYS`).
 CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
 #: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
 PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
-
-
-
-def instruction_onehot(text: str) -> np.ndarray:
-    """A 14-number code of an Algorithm 1 instruction: vertical (6), horizontal (6), door/drawer (2)."""
-    d = describe_instruction(text)
-    code = np.zeros(INSTRUCTION_DIM, dtype=np.float32)
-    code[VERTICAL_LABELS.index(d.vertical) if d.vertical in VERTICAL_LABELS else 0] = 1.0
-    code[len(VERTICAL_LABELS) + (HORIZONTAL_LABELS.index(d.horizontal) if d.horizontal in HORIZONTAL_LABELS
-                                 else 0)] = 1.0
-    code[len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + KIND_LABELS.index(d.kind)] = 1.0
-    return code
 
 
 @dataclass(frozen=True)
