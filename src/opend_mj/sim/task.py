@@ -28,7 +28,8 @@ from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
 from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
-from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift, fuse_depth  # noqa: E402
+from opend_mj.sim.depth_sensor import fuse_depth  # noqa: E402
+from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 from opend_mj.sim.success import Outcome, SuccessChecker  # noqa: E402,F401  (Outcome: part of this module's API)
@@ -133,12 +134,12 @@ class OpenCabinetTask(composer.Task):
         self.cabinet = Cabinet(Path(episode.cabinet_dir))
         self._arena.attach_cabinet(self.cabinet)
         self.target = self.cabinet.target(episode.target_joint)
-        self.instruction = episode.instruction or self.target.instruction
         self.hand = Hand(episode.hand)
         self.mocap = attach_with_mocap(self._arena, self.hand)
         lo, hi = self.cabinet.bounds
         #: the perturbation's values for this scene (neutral without one)
         self.shift = SceneShift.draw(config.perturb, episode.seed, (lo, hi), config.perturb_config)
+        self.instruction = self._instruction(episode.instruction)
         self.camera_pose, start = scene_geometry((lo, hi), config, self.shift)
         self.shift.check((lo, hi), self.camera_pose.pos, start, label=f"{self.cabinet.directory}")
         self.camera = self._arena.add_camera(self.camera_pose, name="front")
@@ -178,10 +179,14 @@ class OpenCabinetTask(composer.Task):
 
         self.target = self.cabinet.target(joint)
         self.episode = dataclasses.replace(self.episode, target_joint=joint, instruction=instruction)
-        self.instruction = instruction or self.target.instruction
+        self.instruction = self._instruction(instruction)
         self.checker = SuccessChecker(self.cabinet, self.target, self.config.success_threshold,
                                       self.config.moved_threshold)
         self._index_cache = None
+
+    def _instruction(self, given: str | None) -> str:
+        """``given``, else the target's instruction as the instruction axis rewords it, else its own."""
+        return given or self.shift.reword(self.target) or self.target.instruction
 
     # ------------------------------------------------------------------ composition
     @property
@@ -215,7 +220,7 @@ class OpenCabinetTask(composer.Task):
 
     def sense_depth(self, rgb: np.ndarray, depth: np.ndarray, frames: int = 1) -> np.ndarray:
         """The depth image solvers and agents receive for a render (the sensor's, under depth_noise);
-        ``frames`` > 1: that many sensor frames of the still scene, fused (`perturb.fuse_depth`)."""
+        ``frames`` > 1: that many sensor frames of the still scene, fused (`depth_sensor.fuse_depth`)."""
         if self.depth_sensor is None:
             return depth
         return fuse_depth([self.depth_sensor(rgb, depth) for _ in range(max(1, frames))])
