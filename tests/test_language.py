@@ -196,3 +196,15 @@ def test_canonical_instruction_undoes_every_paraphrase(template):
                    ("middle", "middle", "drawer"), ("", "", "drawer")]:
         d = Description(*labels)
         assert canonical_instruction(paraphrase(d, template)) == d.instruction
+
+
+def test_instruction_onehot_codes_the_labels_of_any_phrasing():
+    import numpy as np
+
+    from opend_mj.language import INSTRUCTION_DIM, instruction_onehot
+
+    code = instruction_onehot("second top left drawer")
+    assert code.dtype == np.float32 and code.shape == (INSTRUCTION_DIM,) == (14,)
+    assert np.flatnonzero(code).tolist() == [2, 7, 12]  # "second top", "left", drawer
+    assert np.flatnonzero(instruction_onehot("door")).tolist() == [0, 6, 13]  # no word needed: ""
+    assert np.array_equal(instruction_onehot("open the drawer second from the top on the left"), code)

@@ -730,7 +730,7 @@ def test_cliport_finds_a_bar_that_sinks_into_a_real_sensors_noise(front_view):
 
     from opend_mj.policy.learned.affordance import CLIPortSolver, choose_proposal
     from opend_mj.policy.perception.noise import fill_holes
-    from opend_mj.sim.perturb import sensor_depth
+    from opend_mj.sim.depth_sensor import sensor_depth
 
     depth = np.full((256, 256), 3.0, np.float32)
     depth[40:216, 40:216] = 2.0

@@ -124,7 +124,7 @@ def test_handles_that_sink_into_a_real_sensors_noise_are_proposed_averaged_along
     each is one proposal, most of it, and nothing else is; exact depth is searched as it always was."""
     from opend_mj.policy.perception import ProposalConfig, handle_proposals
     from opend_mj.policy.perception.proposals import NOISE_WINDOWS
-    from opend_mj.sim.perturb import sensor_depth
+    from opend_mj.sim.depth_sensor import sensor_depth
 
     depth = np.full((256, 256), 3.0, np.float32)
     depth[40:216, 40:216] = 2.0

@@ -30,16 +30,16 @@ def test_draw_deterministic_and_axes_independent():
     bounds = (np.array([-0.25, -0.4, 0.0]), np.array([0.25, 0.4, 0.9]))
     a = SceneShift.draw("camera_pose=strong", 7, bounds)
     assert a == SceneShift.draw("camera_pose=strong", 7, bounds)
-    assert a.camera_offset != SceneShift.draw("camera_pose=strong", 8, bounds).camera_offset
+    assert a["camera_pose"].offset != SceneShift.draw("camera_pose=strong", 8, bounds)["camera_pose"].offset
     both = SceneShift.draw("camera_pose=strong,light=mild", 7, bounds)
-    assert both.camera_offset == a.camera_offset and both.camera_turn == a.camera_turn
+    assert both["camera_pose"] == a["camera_pose"] and both["camera_fov"] is None
     for seed in range(20):  # the levels' limits hold
         s = SceneShift.draw("camera_pose=mild,camera_fov=strong,physics=strong", seed, bounds)
-        assert np.linalg.norm(s.camera_offset) <= 0.03 + 1e-12
-        turn = np.degrees(np.arccos(np.clip((np.trace(np.array(s.camera_turn)) - 1) / 2, -1, 1)))
+        assert np.linalg.norm(s["camera_pose"].offset) <= 0.03 + 1e-12
+        turn = np.degrees(np.arccos(np.clip((np.trace(np.array(s["camera_pose"].turn)) - 1) / 2, -1, 1)))
         assert turn <= 3.0 + 1e-9
-        assert 0.85 - 1e-12 <= s.fov_factor <= 1.15 + 1e-12
-        assert all(0.4 - 1e-12 <= f <= 3.0 + 1e-12 for f in s.physics.values())
+        assert 0.85 - 1e-12 <= s["camera_fov"] <= 1.15 + 1e-12
+        assert all(0.4 - 1e-12 <= f <= 3.0 + 1e-12 for f in s["physics"].values())
 
 
 def test_check_refuses_camera_inside_and_distractor_in_path():
@@ -47,14 +47,15 @@ def test_check_refuses_camera_inside_and_distractor_in_path():
     shift = SceneShift.draw("distractors=strong", 3, bounds)
     start = np.array([-0.6, 0.8, 0.45])
     shift.check(bounds, np.array([-2.0, 0.0, 1.2]), start)  # as drawn: valid
-    assert shift.distractors and all(d.box()[0][0] > bounds[0][0] for d in shift.distractors)  # none in front
+    assert shift["distractors"] and all(d.box()[0][0] > bounds[0][0] for d in shift["distractors"])  # none in front
     with pytest.raises(PerturbError, match="camera inside the cabinet"):
         shift.check(bounds, np.array([0.0, 0.0, 0.5]), start, label="cab")
     from dataclasses import replace
 
     from opend_mj.sim.perturb import Distractor
 
-    blocking = replace(shift, distractors=(Distractor("mug", (-0.6, 0.75, 0.4), (0.05, 0.05, 0.05)),))
+    blocking = replace(shift, values={**shift.values,
+                                      "distractors": (Distractor("mug", (-0.6, 0.75, 0.4), (0.05, 0.05, 0.05)),)})
     with pytest.raises(PerturbError, match=r"cab: perturbation distractors=strong puts a distractor \(mug"):
         blocking.check(bounds, np.array([-2.0, 0.0, 1.2]), start, label="cab")
 
@@ -115,7 +116,7 @@ def test_each_axis_changes_the_scene(proc_cabinets):
         assert env.physics.data.geom_xpos[names.index(n)][0] > lo[0]
 
     env = _env(cab, "physics=strong")
-    m1, f = env.physics.model, env.task.shift.physics
+    m1, f = env.physics.model, env.task.shift["physics"]
     dof = int(env.physics.bind(env.task.cabinet.joint_element(env.task.target.joint)).dofadr)
     assert np.isclose(m1.dof_damping[dof], m0.dof_damping[dof] * f["joint_damping"])
     assert np.isclose(m1.dof_frictionloss[dof], m0.dof_frictionloss[dof] * f["joint_frictionloss"])
@@ -155,11 +156,15 @@ def test_depth_noise_and_instruction(proc_cabinets):
 
     from opend_mj.sim.cabinet import load_cabinet_info
 
-    for target in load_cabinet_info(cab)["targets"]:
-        job = EpisodeJob(cabinet="c", cabinet_dir=str(cab), joint=target["joint"], split="test", hand="franka",
-                         solver="oracle")
-        for level in ("mild", "strong"):
-            worded = instruction_for(EpisodeJob(**{**job.__dict__, "perturb": f"instruction={level}"}))
+    targets = load_cabinet_info(cab)["targets"]
+    for level in ("mild", "strong"):  # the task rewords every target of the scene (`set_target` too)
+        env = _env(cab, f"instruction={level}", joint=targets[0]["joint"])
+        for target in targets:
+            job = EpisodeJob(cabinet="c", cabinet_dir=str(cab), joint=target["joint"], split="test", hand="franka",
+                             solver="oracle", perturb=f"instruction={level}")
+            assert instruction_for(job) is None  # drawn with the scene's perturbation, applied by the task
+            env.task.set_target(target["joint"], instruction_for(job))
+            worded = env.task.instruction
             assert worded != target["instruction"]
             assert canonical_instruction(worded) == canonical_instruction(target["instruction"])
 
@@ -246,7 +251,7 @@ def test_axes_documented():
 def test_sensor_depth_is_a_seeded_draw_and_fusing_frames_fills_holes():
     """`sensor_depth`: the depth_noise sensor's image of a render, for training solvers on it; the
     same seed gives the same image; fusing frames leaves fewer holes and less noise."""
-    from opend_mj.sim.perturb import sensor_depth
+    from opend_mj.sim.depth_sensor import sensor_depth
 
     depth = np.full((64, 64), 2.0, np.float32)
     depth[20:40, 20:40] = 1.95  # a raised square: edges that drop out

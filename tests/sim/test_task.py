@@ -181,7 +181,8 @@ def test_fast_environment_matches_composer_loop(drawer_case):
     """The tight substep loop must simulate exactly what composer's hook-per-substep loop does."""
     from dm_control import composer
 
-    from opend_mj.sim.task import OpenCabinetTask, OpenDEnvironment
+    from opend_mj.sim.environment import OpenDEnvironment
+    from opend_mj.sim.task import OpenCabinetTask
 
     cabinet, target = drawer_case
     episode = EpisodeSpec(cabinet.dir, target["joint"], "allegro", seed=0)

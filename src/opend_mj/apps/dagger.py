@@ -112,7 +112,8 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     from opend_mj.policy.learned.bc import WATCH_KEY, style_index
     from opend_mj.policy.planner import Observation
     from opend_mj.sim.camera import RGBDCamera
-    from opend_mj.sim.envs import SceneReader, instruction_onehot
+    from opend_mj.language import instruction_onehot
+    from opend_mj.sim.envs import SceneReader
 
     rollout: Rollout = config.rollout
     t0 = time.perf_counter()

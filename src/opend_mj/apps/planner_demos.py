@@ -199,7 +199,8 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     from opend_mj.policy.perception import WATCH_DIM, FrontWatcher
     from opend_mj.policy.planner import Observation, Robot
     from opend_mj.sim.camera import RGBDCamera
-    from opend_mj.sim.envs import ActionAdapter, SceneReader, instruction_onehot
+    from opend_mj.language import instruction_onehot
+    from opend_mj.sim.envs import ActionAdapter, SceneReader
 
     t0 = time.perf_counter()
     env = env if env is not None else make_episode_env(job)

@@ -151,36 +151,20 @@ class _StopAtLast:
 
 
 def instruction_for(job: EpisodeJob) -> str | None:
-    """The job's own phrasing, its paraphrased instruction, or None for the target's own (Algorithm 1)."""
+    """The job's own phrasing, its paraphrased instruction, or None for the task's: the target's own
+    (Algorithm 1), or as the perturbation's instruction axis rewords it (`sim.perturb`, applied by the
+    task, which draws it with the rest of the scene's perturbation)."""
     if job.phrasing is not None:
         return job.phrasing
     from opend_mj.sim.perturb import perturb_items
 
-    level = perturb_items(job.perturb).get("instruction")
-    if not job.paraphrase and level is None:
+    if not job.paraphrase or "instruction" in perturb_items(job.perturb):
         return None
     from opend_mj.language import Description, paraphrase
     from opend_mj.sim.cabinet import load_cabinet_info
 
     target = next(t for t in load_cabinet_info(Path(job.cabinet_dir))["targets"] if t["joint"] == job.joint)
-    description = Description(target["vertical"], target["horizontal"], target["type"])
-    if level is not None:
-        return perturbed_instruction(description, level, scene_seed(job), job.joint)
-    return paraphrase(description, job.paraphrase)
-
-
-def perturbed_instruction(description, level: str, seed: int, joint: str) -> str:
-    """The instruction axis of `sim.perturb`: a rewording drawn from the scene's seed and the
-    target (mild: one of the fixed paraphrase templates; strong: one drawn from the grammar)."""
-    import zlib
-
-    from opend_mj.language import paraphrase, rewordings
-    from opend_mj.sim.perturb import AXES, PerturbConfig
-
-    rng = np.random.default_rng([int(seed), 48, AXES.index("instruction"), zlib.crc32(joint.encode())])
-    if PerturbConfig().level(level).instruction == "paraphrase":
-        return paraphrase(description, 1 + int(rng.integers(3)))
-    return rewordings(description, n=1, seed=int(rng.integers(2**31)))[0]
+    return paraphrase(Description(target["vertical"], target["horizontal"], target["type"]), job.paraphrase)
 
 
 def make_episode_env(job: EpisodeJob):

@@ -1,6 +1,7 @@
 """Language: the OpenD paper's Algorithm 1 (instructions from handle positions, :mod:`.algorithm1`),
 reading instructions as people say them back into its labels or refusing them (:mod:`.parser`), and
-rewordings generated from a grammar (:mod:`.grammar`).
+rewordings generated from a grammar (:mod:`.grammar`), and the instruction's one-hot code that the
+environments and learned policies read (:mod:`.onehot`).
 
 Every part of the pipeline that reads an instruction (the planner's door / drawer and hinge side,
 both learned solvers, the environments' one-hot code, the score tables) reads it through
@@ -19,6 +20,7 @@ from opend_mj.language.algorithm1 import (
     levels,
 )
 from opend_mj.language.grammar import PARAPHRASES, paraphrase, rewordings
+from opend_mj.language.onehot import INSTRUCTION_DIM, instruction_onehot
 from opend_mj.language.parser import InstructionNotUnderstood, normalise, parse_instruction
 
 #: The kinds of target an instruction names (`target_kind`): what a run, a training set or an
@@ -29,6 +31,7 @@ __all__ = [
     "TARGET_KINDS", "Description", "LanguageConfig", "LanguageInvalid", "TargetLayout", "describe", "levels", "PARAPHRASES",
     "paraphrase", "rewordings", "InstructionNotUnderstood", "normalise", "parse_instruction",
     "describe_instruction", "canonical_instruction", "target_kind", "hinge_side", "all_templates",
+    "INSTRUCTION_DIM", "instruction_onehot",
 ]
 
 

@@ -103,7 +103,7 @@ class BCAgent:
         if ckpt.get("hand") not in (None, episode.hand):
             raise ValueError(f"{paths[0]}: trained for the {ckpt['hand']} hand, not {episode.hand}")
         self._low, self._high = np.asarray(ckpt["finger_low"]), np.asarray(ckpt["finger_high"])
-        from opend_mj.sim.envs import instruction_onehot
+        from opend_mj.language import instruction_onehot
 
         # the percept numbers each checkpoint was trained with (older ones: the first 22 of today's)
         codes = len(instruction_onehot(episode.instruction))

@@ -44,43 +44,26 @@ import numpy as np  # noqa: E402
 from dm_env import specs  # noqa: E402
 
 from opend_mj.assets.layout import CABINET_JSON, load_manifest  # noqa: E402
-from opend_mj.language import describe_instruction  # noqa: E402
+from opend_mj.language.onehot import INSTRUCTION_DIM, instruction_onehot  # noqa: E402
 from opend_mj.sim.fast.binding import LAST, NAN, WARNING_BITS  # noqa: E402
 from opend_mj.sim.hands import touch_parts  # noqa: E402
 from opend_mj.sim.rewards import REWARD_MODES, DenseRewardConfig, dense_reward, sparse_reward  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES  # noqa: E402
 from opend_mj.sim.actions import ABSOLUTE_ROOT_HIGH, ABSOLUTE_ROOT_LOW, ActionAdapter  # noqa: E402,F401
 from opend_mj.sim.scene_reader import PROPRIO_KEYS, SceneReader  # noqa: E402,F401  (SceneReader: re-exported)
-from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, OpenDEnvironment, TaskConfig, warning_names  # noqa: E402
+from opend_mj.sim.environment import OpenDEnvironment, warning_names  # noqa: E402
+from opend_mj.sim.task import EpisodeSpec, OpenCabinetTask, TaskConfig  # noqa: E402
 from opend_mj.transforms import turn_about_z  # noqa: E402
 
 OBS_MODES = ("state", "rgb", "depth", "rgbd")
 CONTROLS = ("delta", "absolute")
 INSTRUCTION_MODES = ("onehot", "text")
 
-#: Labels of the instruction one-hot code (Algorithm 1's words; "" = the word is not needed).
-VERTICAL_LABELS = ("", "top", "second top", "middle", "second bottom", "bottom")
-HORIZONTAL_LABELS = ("", "left", "second left", "middle", "second right", "right")
-KIND_LABELS = ("drawer", "door")
-INSTRUCTION_DIM = len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + len(KIND_LABELS)
-
 #: The keys an agent may read (the paper's inputs: RGB-D, camera, instruction, the hand's own state:
 #: `PROPRIO_KEYS`).
 CAMERA_KEYS = ("rgb", "depth", "camera_K", "camera_pose")
 #: Ground truth, only with ``privileged=True`` (never handed to a benchmark agent).
 PRIVILEGED_KEYS = ("handle_pos", "handle_size", "open_ratio")
-
-
-
-def instruction_onehot(text: str) -> np.ndarray:
-    """A 14-number code of an Algorithm 1 instruction: vertical (6), horizontal (6), door/drawer (2)."""
-    d = describe_instruction(text)
-    code = np.zeros(INSTRUCTION_DIM, dtype=np.float32)
-    code[VERTICAL_LABELS.index(d.vertical) if d.vertical in VERTICAL_LABELS else 0] = 1.0
-    code[len(VERTICAL_LABELS) + (HORIZONTAL_LABELS.index(d.horizontal) if d.horizontal in HORIZONTAL_LABELS
-                                 else 0)] = 1.0
-    code[len(VERTICAL_LABELS) + len(HORIZONTAL_LABELS) + KIND_LABELS.index(d.kind)] = 1.0
-    return code
 
 
 @dataclass(frozen=True)
@@ -109,8 +92,8 @@ class EnvConfig:
     start_noise: float = 0.05  # m, per axis, around the benchmark's hand start
     start_yaw_noise: float = 0.15  # rad
     max_scenes: int = 4  # compiled scenes kept for reuse
-    #: False: step through composer and read observations the straightforward way (the reference
-    #: the default lean step is tested against, bit for bit; several times slower)
+    #: False: the reference step (`sim.reference.ReferenceStep`: the episode's dm_env step, every
+    #: observation read on its own), which the default step is tested against, bit for bit; slower
     lean_step: bool = True
     #: with the lean step: the whole control step in one compiled call where `opend_mj.sim.fast`
     #: loads (the same numbers as the lean Python step, which runs with False)
@@ -231,13 +214,13 @@ class StartPoseTask(OpenCabinetTask):
 class OpenDCore:
     """The engine of the environments over the dataset: sampling, scenes, observations, rewards.
 
-    The step (``lean_step=True``, the default) calls the task's own action handling and its tight
-    substep loop directly (no composer hooks, no observation buffers), brings only body, geom and
-    site poses up to date when nothing renders, and writes every float observation into one
-    preallocated vector through indices bound once per scene (`SceneReader.fill`); the observation
-    dict holds views into one copy of that vector in the dtype asked for. ``lean_step=False`` steps
-    through composer's ``Environment.step`` and reads each observation the straightforward way: the
-    reference the lean step is tested against, to the bit.
+    The step is one compiled call (`sim.fast.binding.EnvStep`) where the compiled step loads, else
+    the Python step with the same numbers: the task's own action handling and its tight substep loop
+    (no composer hooks, no observation buffers), only body, geom and site poses brought up to date
+    when nothing renders, and every float observation written into one preallocated vector through
+    indices bound once per scene (`SceneReader.fill`); the observation dict holds views into one
+    copy of that vector in the dtype asked for. ``lean_step=False`` runs the reference step instead
+    (`sim.reference.ReferenceStep`), which tests compare the step with, to the bit.
     """
 
     def __init__(self, config: EnvConfig):
@@ -272,6 +255,12 @@ class OpenDCore:
         self._delta = config.control == "delta"
         #: the compiled step of the current episode (`sim.fast.binding.EnvStep`), or None
         self._fast = None
+        #: with ``lean_step=False``: the reference step (`sim.reference.ReferenceStep`)
+        self._reference = None
+        if not config.lean_step:
+            from opend_mj.sim.reference import ReferenceStep
+
+            self._reference = ReferenceStep(self)
 
     def set_observation_order(self, keys) -> None:
         """The key order of the observation dicts `observe` returns (e.g. the gymnasium space's).
@@ -350,17 +339,15 @@ class OpenDCore:
         if self.config.obs_mode != "state":
             for key, value in scene.camera_arrays().items():
                 flat[sl[key]] = value.ravel()
-        terms = self._judge(scene.probe.terms() if not self.config.lean_step else scene.fill(flat, self.config.privileged))
+        reference = self._reference
+        terms = self._judge(reference.terms() if reference is not None else scene.fill(flat, self.config.privileged))
         dense_reward(terms, self.config.success_threshold, self.config.dense)  # fills reach / open / others
-        return self.observe(dtype, filled=self.config.lean_step), self._info(terms)
+        return self.observe(dtype), self._info(terms)
 
     def native_action(self, action) -> np.ndarray:
         """The task's own action for ``action`` in this environment's control mode."""
         if self.config.control == "absolute":
             return np.asarray(action, dtype=np.float64)
-        if not self.config.lean_step:
-            d, mid = self.scene._data, self.scene._mocap
-            return self.adapter.from_delta_reference(action, d.mocap_pos[mid], d.mocap_quat[mid])
         return self.adapter.from_delta(action, *self.scene.task.mocap_views)
 
     def step(self, action, dtype=np.float64, observe: bool = True) -> tuple[dict | None, float, bool, bool, dict]:
@@ -380,7 +367,9 @@ class OpenDCore:
                 task.physics_warnings.append({"time": float(scene._data.time), "warnings": warnings})
             last = bool(status & LAST)
             terms = fast.terms(status)
-        elif c.lean_step:
+        elif self._reference is not None:
+            last, terms = self._reference.step(action)
+        else:  # the Python step: the same numbers as the compiled one
             if self._delta:  # the task's action in parts (`delta_parts` checks it as before_step does)
                 task.apply_action(*self.adapter.delta_parts(action, *task.mocap_views))
             else:
@@ -394,9 +383,6 @@ class OpenDCore:
                 task.physics_warnings.append({"time": float(data.time), "warnings": warnings})
             last = bool(data.time >= self.task_config.time_limit)
             terms = scene.fill(self._flat, c.privileged)
-        else:
-            last = scene.env.step(self.native_action(action)).last()
-            terms = scene.probe.terms()
         if c.range_success is not None:
             self._judge(terms)
         self.steps += 1
@@ -415,7 +401,7 @@ class OpenDCore:
         info = self._info(terms)
         if warnings:
             info["physics_warnings"] = warnings
-        obs = self.observe(dtype, filled=c.lean_step) if observe else None
+        obs = self.observe(dtype) if observe else None
         return obs, reward, terminated, truncated, info
 
     def _judge(self, terms):
@@ -436,14 +422,13 @@ class OpenDCore:
                 "target": ep.joint, "target_type": ep.target_type, "room": ep.room, "episode_seed": ep.seed,
                 "sim_time": float(self.scene._data.time), "reward_terms": terms.to_dict()}
 
-    def observe(self, dtype=np.float64, filled: bool = False) -> dict:
-        """This environment's observation: float arrays in ``dtype``, rgb uint8, depth float32.
-
-        ``filled``: the float vector already holds this state (`SceneReader.fill` ran since the last
-        physics change); otherwise the observation is read the straightforward way.
-        """
-        c, scene = self.config, self.scene
-        if filled:
+    def observe(self, dtype=np.float64) -> dict:
+        """This environment's observation of the current state (after `reset` or `step`): float
+        arrays in ``dtype``, rgb uint8, depth float32."""
+        c = self.config
+        if self._reference is not None:
+            obs = self._reference.observe(dtype)
+        else:  # views of one copy of the float vector, which the step filled
             flat = self._flat.astype(dtype)
             if self._flat_plan is not None:
                 obs = {key: flat[sl] for key, sl in self._flat_plan}
@@ -452,14 +437,6 @@ class OpenDCore:
                        for key, sl, shape in self._float_plan}
             if self._floats_only:
                 return obs
-        else:
-            obs = {key: np.asarray(v, dtype=dtype) for key, v in scene.proprio().items()}
-            if c.instruction == "onehot":
-                obs["instruction"] = instruction_onehot(self.episode.instruction).astype(dtype)
-            if c.obs_mode != "state":
-                obs.update({k: v.astype(dtype) for k, v in scene.camera_arrays().items()})
-            if c.privileged:
-                obs.update({k: np.asarray(v, dtype=dtype) for k, v in scene.privileged().items()})
         if c.instruction == "text":
             obs["instruction"] = self.episode.instruction
         obs.update(self.images())

@@ -14,11 +14,10 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import collections  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import dm_env  # noqa: E402
+import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import composer  # noqa: E402
 from dm_control.composer.observation import observable  # noqa: E402
@@ -28,7 +27,15 @@ from opend_mj.sim.cabinet import Cabinet, Target  # noqa: E402
 from opend_mj.sim.camera import camera_view, geom_box_corners, place_camera  # noqa: E402
 from opend_mj.sim.hands import Hand, attach_with_mocap, orientation_for_handle  # noqa: E402
 from opend_mj.sim.mocap_path import MocapPathPlanner  # noqa: E402
-from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift, fuse_depth  # noqa: E402
+from opend_mj.sim.depth_sensor import fuse_depth  # noqa: E402
+from opend_mj.sim.environment import (  # noqa: E402
+    WARNING_IDS,
+    WARNING_POSITIONS,
+    WARNING_SLICE,
+    OpenDEnvironment,
+    warning_names,
+)
+from opend_mj.sim.perturb import DEFAULT_CONFIG, PerturbConfig, SceneShift  # noqa: E402
 from opend_mj.sim.physics import PHYSICS  # noqa: E402
 from opend_mj.sim.rooms import ROOM_NAMES, RoomArena  # noqa: E402
 from opend_mj.sim.success import Outcome, SuccessChecker  # noqa: E402,F401  (Outcome: part of this module's API)
@@ -133,12 +140,12 @@ class OpenCabinetTask(composer.Task):
         self.cabinet = Cabinet(Path(episode.cabinet_dir))
         self._arena.attach_cabinet(self.cabinet)
         self.target = self.cabinet.target(episode.target_joint)
-        self.instruction = episode.instruction or self.target.instruction
         self.hand = Hand(episode.hand)
         self.mocap = attach_with_mocap(self._arena, self.hand)
         lo, hi = self.cabinet.bounds
         #: the perturbation's values for this scene (neutral without one)
         self.shift = SceneShift.draw(config.perturb, episode.seed, (lo, hi), config.perturb_config)
+        self.instruction = self._instruction(episode.instruction)
         self.camera_pose, start = scene_geometry((lo, hi), config, self.shift)
         self.shift.check((lo, hi), self.camera_pose.pos, start, label=f"{self.cabinet.directory}")
         self.camera = self._arena.add_camera(self.camera_pose, name="front")
@@ -178,10 +185,14 @@ class OpenCabinetTask(composer.Task):
 
         self.target = self.cabinet.target(joint)
         self.episode = dataclasses.replace(self.episode, target_joint=joint, instruction=instruction)
-        self.instruction = instruction or self.target.instruction
+        self.instruction = self._instruction(instruction)
         self.checker = SuccessChecker(self.cabinet, self.target, self.config.success_threshold,
                                       self.config.moved_threshold)
         self._index_cache = None
+
+    def _instruction(self, given: str | None) -> str:
+        """``given``, else the target's instruction as the instruction axis rewords it, else its own."""
+        return given or self.shift.reword(self.target) or self.target.instruction
 
     # ------------------------------------------------------------------ composition
     @property
@@ -215,7 +226,7 @@ class OpenCabinetTask(composer.Task):
 
     def sense_depth(self, rgb: np.ndarray, depth: np.ndarray, frames: int = 1) -> np.ndarray:
         """The depth image solvers and agents receive for a render (the sensor's, under depth_noise);
-        ``frames`` > 1: that many sensor frames of the still scene, fused (`perturb.fuse_depth`)."""
+        ``frames`` > 1: that many sensor frames of the still scene, fused (`depth_sensor.fuse_depth`)."""
         if self.depth_sensor is None:
             return depth
         return fuse_depth([self.depth_sensor(rgb, depth) for _ in range(max(1, frames))])
@@ -314,8 +325,15 @@ class OpenCabinetTask(composer.Task):
         if self._path_quat is not None:
             physics.data.mocap_quat[self._mocap_id] = self._path_quat[i]
 
+    def control_step(self, physics, action, cameras: bool = True) -> list[str]:
+        """One control step: the action (`before_step`) and every substep (`fast_substeps`), in
+        compiled code where it loads; the names of MuJoCo instability warnings it raised. What
+        `environment.OpenDEnvironment.step` runs."""
+        self.before_step(physics, action, None)
+        return self.fast_substeps(physics, cameras)
+
     def fast_substeps(self, physics, cameras: bool = True) -> list[str]:
-        """All substeps of one control step in a tight loop (what `OpenDEnvironment` uses).
+        """All substeps of one control step in a tight loop (`control_step`'s).
 
         Does exactly what `before_substep` + `physics.step()` do for each substep, without
         composer's per-substep Python hooks; once the mocap has reached its target pose (at once
@@ -337,7 +355,7 @@ class OpenCabinetTask(composer.Task):
         writes = self._path_writes if path_pos is not None or path_quat is not None else 0
         if writes:
             mocap_pos, mocap_quat = self.mocap_views
-            step = _mujoco.mj_step
+            step = mujoco.mj_step
             if path_pos is not None and path_quat is not None:  # moving and turning
                 for i in range(writes):
                     mocap_pos[...] = path_pos[i]
@@ -349,15 +367,15 @@ class OpenCabinetTask(composer.Task):
                     view[...] = rows[i]
                     step(model, data)
         if writes < self._substeps:  # the mocap pose no longer changes (mj_step leaves it alone): one call
-            _mujoco.mj_step(model, data, self._substeps - writes)
-        _mujoco.mj_kinematics(model, data)
+            mujoco.mj_step(model, data, self._substeps - writes)
+        mujoco.mj_kinematics(model, data)
         if cameras:
-            _mujoco.mj_comPos(model, data)
-            _mujoco.mj_camlight(model, data)
+            mujoco.mj_comPos(model, data)
+            mujoco.mj_camlight(model, data)
         after = counts.tolist()
         if after == before:  # the common case: no instability warning in this control step
             return []
-        return [name for name, i in _WARNING_POSITIONS if after[i] > before[i]]
+        return [name for name, i in WARNING_POSITIONS if after[i] > before[i]]
 
     # ------------------------------------------------------------------ episode
     def initialize_episode(self, physics, random_state):
@@ -387,8 +405,8 @@ class OpenCabinetTask(composer.Task):
         #: (mocap position, mocap quaternion): views of the mocap body's rows of MjData
         self.mocap_views = (data.mocap_pos[self._mocap_id], data.mocap_quat[self._mocap_id])
         self._model = physics.model.ptr
-        #: a view of MjData's instability warning counters (`_WARNING_SLICE`)
-        self._warning_counts = data.warning.number[_WARNING_SLICE]
+        #: a view of MjData's instability warning counters (`environment.WARNING_SLICE`)
+        self._warning_counts = data.warning.number[WARNING_SLICE]
         self._fast, self._fast_planned = None, False
         if self.config.compiled_step:
             from opend_mj.sim.fast import ddot_pointer, library
@@ -396,7 +414,7 @@ class OpenCabinetTask(composer.Task):
 
             lib = library()
             if lib is not None and TaskStep.supports(self):
-                self._fast = TaskStep(lib, self, physics, ddot_pointer(), _warning_ids)
+                self._fast = TaskStep(lib, self, physics, ddot_pointer(), WARNING_IDS)
 
     def mocap_path(self) -> tuple[np.ndarray | None, np.ndarray | None, int]:
         """The mocap's path of the current control step: (position rows (n, 3) or None where the
@@ -479,98 +497,6 @@ def scene_geometry(bounds, config: TaskConfig, shift: SceneShift):
     view = CameraView(CameraIntrinsics.from_fovy(pose.fovy, size, size), np.asarray(pose.pos, float),
                       np.asarray(pose.rot, float))
     return pose, start_position(bounds, view, size)
-
-
-import mujoco as _mujoco  # noqa: E402
-
-_INSTABILITY_WARNINGS = (_mujoco.mjtWarning.mjWARN_BADQACC, _mujoco.mjtWarning.mjWARN_BADQPOS,
-                         _mujoco.mjtWarning.mjWARN_BADQVEL)
-_WARNING_NAMES = [w.name for w in _INSTABILITY_WARNINGS]
-_warning_ids = [int(w) for w in _INSTABILITY_WARNINGS]
-#: the counters of MjData.warning from the first instability warning to the last (a view of them),
-#: and each instability warning's position in it (`_INSTABILITY_WARNINGS` order)
-_WARNING_SLICE = slice(min(_warning_ids), max(_warning_ids) + 1)
-_WARNING_POSITIONS = [(name, i - min(_warning_ids)) for name, i in zip(_WARNING_NAMES, _warning_ids)]
-
-
-def warning_names(bits: int) -> list[str]:
-    """The instability warnings whose bits are set (bit k: the k-th of `_INSTABILITY_WARNINGS`; the
-    compiled step's status bits)."""
-    return [name for k, name in enumerate(_WARNING_NAMES) if bits >> k & 1] if bits else []
-
-
-class OpenDEnvironment(composer.Environment):
-    """composer.Environment with the control step in one tight loop (no per-substep Python hooks).
-
-    The entities of this task have no substep hooks, so running the substeps in
-    `OpenCabinetTask.fast_substeps` gives the same trajectory as composer's loop, several times
-    faster. Where every enabled observable is read once per control step with no buffer, delay or
-    aggregator (the task's own observables are), observations are read directly instead of through
-    composer's observation buffers; the values are the same. With ``observations=False`` those
-    plain reads are skipped and ``step`` returns an empty observation. The MJCF never changes between episodes
-    of one task, so a reset does not recompile it. MuJoCo instability warnings are recorded in
-    `task.physics_warnings` and end the episode.
-    """
-
-    def __init__(self, *args, observations: bool = True, **kwargs):
-        kwargs.setdefault("recompile_mjcf_every_episode", False)
-        super().__init__(*args, **kwargs)
-        #: False: ``step`` returns an empty observation (for callers that read MjData themselves,
-        #: as the planner does: five observables read and copied per control step for nothing)
-        self._step_observations = bool(observations)
-        # The constructor has just compiled the model and nothing changes it per episode.
-        self._mjcf_never_compiled = self._recompile_mjcf_every_episode
-        self._plain_readers = None
-
-    def reset(self):
-        timestep = super().reset()
-        self._plain_readers = self._make_plain_readers()
-        return timestep
-
-    def _make_plain_readers(self):
-        """(name, callable) per enabled observable if all are plain (see the class doc), else None."""
-        updater = self._observation_updater
-        if updater._is_nested or not self._strip_singleton_obs_buffer_dim:
-            return None
-        readers = []
-        for name, enabled in updater._enabled_structure.items():
-            if (enabled.update_interval != 1 or enabled.delay != 0 or enabled.buffer_size != 1
-                    or enabled.observable.aggregator is not None):
-                return None
-            readers.append((name, enabled.observation_callable))
-        return readers
-
-    def step(self, action):
-        if self._reset_next_step:
-            self._reset_next_step = False
-            return self.reset()
-        task, physics, proxy = self._task, self._physics, self._physics_proxy
-        readers = self._plain_readers if self._step_observations or self._plain_readers is None else ()
-        self._hooks.before_step(proxy, action, self._random_state)
-        if readers is None:
-            updater = self._observation_updater
-            updater.prepare_for_next_control_step()
-        warnings = task.fast_substeps(physics)
-        if readers is None:
-            updater._step_counter += self._n_sub_steps - 1  # the skipped per-substep updates (no-ops)
-        self._hooks.after_step(proxy, self._random_state)
-        if readers is None:
-            updater.update()
-            obs = updater.get_observation()
-        else:
-            obs = collections.OrderedDict((name, np.array(read())) for name, read in readers)
-        data = physics.data.ptr
-        if warnings or (not math.isfinite(float(data.qpos.dot(data.qpos))) and not np.isfinite(data.qpos).all()):
-            task.physics_warnings.append({"time": float(data.time), "warnings": warnings or ["NaN"]})
-            reward, discount, terminating = 0.0, 0.0, True
-        else:
-            reward = task.get_reward(proxy)
-            discount = task.get_discount(proxy)
-            terminating = task.should_terminate_episode(proxy) or data.time >= self._time_limit
-        if not terminating:
-            return dm_env.TimeStep(dm_env.StepType.MID, reward, discount, obs)
-        self._reset_next_step = True
-        return dm_env.TimeStep(dm_env.StepType.LAST, reward, discount, obs)
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,

@@ -7,7 +7,7 @@ Inputs (only what the evaluation protocol gives an agent; never ground truth):
   (:func:`perceive_handle`: the planner's own perception, `opend_mj.policy.perception`): the 3D grip
   centre (world, m), bar or knob, horizontal or vertical, its extent (m), how far it stands out of
   the panel, the free space around it, the side a door hinges on as the depth image shows it; and
-  the instruction's one-hot code (`opend_mj.sim.envs.instruction_onehot`, 14 numbers); for a door,
+  the instruction's one-hot code (`opend_mj.language.instruction_onehot`, 14 numbers); for a door,
   where its hinge line is (the planner's own estimate: the hinge side named by the instruction or
   seen in depth, at the edge of the door's front plane in depth), relative to the handle, which
   gives the circle that the door's handle moves on.
@@ -181,7 +181,7 @@ def percept_vector(p: HandlePercept) -> np.ndarray:
 
 def context_features(percept_vec: np.ndarray, instruction: str) -> np.ndarray:
     """The episode's context: the percept vector and the instruction's one-hot code."""
-    from opend_mj.sim.envs import instruction_onehot
+    from opend_mj.language import instruction_onehot
 
     return np.concatenate([np.asarray(percept_vec, float), instruction_onehot(instruction)]).astype(np.float32)
 

@@ -21,7 +21,7 @@ MAX_FINGERS = 64
 MAX_HANDLE_BODIES = 8
 
 # status bits (step.c's OFS_*)
-WARNING_BITS = 7  # bit k: the k-th instability warning of `task._INSTABILITY_WARNINGS`
+WARNING_BITS = 7  # bit k: the k-th instability warning of `environment.INSTABILITY_WARNINGS`
 NAN, LAST, BOX_STALE, BAD_ACTION, ZERO_QUAT, DISTANCE = 8, 16, 32, 64, 128, 256
 
 _P, _I, _D = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
