@@ -28,7 +28,8 @@ evaluate: install
 ## The rest of results/: results/real/ (make eval-real) and results/bc/<hand>_shipped_test.jsonl (the
 ## shipped behaviour-cloning policies, docs/demonstrations.md). tests/evaluation/test_results_dir.py
 ## fails on any other file there.
-HANDS := --hand franka --hand allegro --hand shadow --hand skeleton
+## Every hand, in its order, as `opend hands` lists them (a hand is its folder under hands/).
+HANDS = $(foreach h,$(or $(shell $(BIN)/opend hands --names),$(error `$(BIN)/opend hands` listed no hands)),--hand $(h))
 RUN   := $(BIN)/opend run --split test --workers $(WORKERS) --cabinets $(CABINETS)
 LEARNED_RESULTS := cliport_test cliport_test_light07 cliport_test_corpus \
 	fasterrcnn_test fasterrcnn_test_light07 fasterrcnn_test_corpus
@@ -65,7 +66,7 @@ TAG ?=
 eval-real: install
 	$(BIN)/opend build-assets --source $(SOURCE) --out $(REAL_CABINETS) --workers $(WORKERS) $(if $(IDS),--ids $(IDS))
 	mkdir -p $(REAL_OUT)
-	$(BIN)/opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver $(SOLVER) --split $(SPLIT) \
+	$(BIN)/opend run $(HANDS) --solver $(SOLVER) --split $(SPLIT) \
 		--workers $(WORKERS) --cabinets $(REAL_CABINETS) $(RUN_ARGS) --out $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl
 	$(BIN)/opend score $(REAL_OUT)/$(SOLVER)_real$(TAG).jsonl --csv $(REAL_OUT)/$(SOLVER)_scores$(TAG).csv \
 		--plot $(REAL_OUT)/$(SOLVER)_scores$(TAG).png --summary results/real/$(SOLVER)_$(SPLIT)$(TAG).json \
@@ -101,7 +102,7 @@ robustness-real: install
 ## The planner as an interactive expert (docs/demonstrations.md): episodes of the generated test split taken
 ## over mid-way from the planner itself, every hand, at four switch times.
 expert-check: install
-	$(BIN)/opend expert-check --hand franka --hand allegro --hand shadow --hand skeleton --switch 2 --switch 4 \
+	$(BIN)/opend expert-check $(HANDS) --switch 2 --switch 4 \
 		--switch 6 --switch 8 --workers $(WORKERS) --out results/expert/planner_test.jsonl
 
 ## One hand's behaviour-cloning policy (generated cabinets only; deterministic for SEED), resumable:

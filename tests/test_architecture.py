@@ -147,20 +147,21 @@ def test_a_broken_command_module_is_reported_as_what_it_is(monkeypatch):
     assert unknown.exit_code == 2 and "No such command" in unknown.output
 
 
-@pytest.mark.parametrize("hand", ["franka", "allegro", "shadow", "skeleton"])
-def test_hand_scene_includes_its_hand(hand):
+def test_every_shipped_hand_scene_includes_its_hand():
     import mujoco
 
-    from opend_mj.sim.hands import HANDS_DIR
+    from opend_mj.sim.hands import HANDS_DIR, builtin_hands
     from opend_mj.sim.physics import PHYSICS
 
-    scene = HANDS_DIR / hand / "scene.xml"
-    assert '<include file="hand.xml"/>' in scene.read_text()
-    hand_model = mujoco.MjModel.from_xml_path(str(HANDS_DIR / hand / "hand.xml"))
-    scene_model = mujoco.MjModel.from_xml_path(str(scene))
-    assert scene_model.nu == hand_model.nu and scene_model.njnt == hand_model.njnt
-    assert scene_model.opt.timestep == pytest.approx(PHYSICS.timestep)
-    assert (HANDS_DIR / hand / "README.md").is_file()
+    assert len(builtin_hands()) >= 4
+    for hand in builtin_hands():
+        scene = HANDS_DIR / hand / "scene.xml"
+        assert '<include file="hand.xml"/>' in scene.read_text()
+        hand_model = mujoco.MjModel.from_xml_path(str(HANDS_DIR / hand / "hand.xml"))
+        scene_model = mujoco.MjModel.from_xml_path(str(scene))
+        assert scene_model.nu == hand_model.nu and scene_model.njnt == hand_model.njnt, hand
+        assert scene_model.opt.timestep == pytest.approx(PHYSICS.timestep)
+        assert (HANDS_DIR / hand / "README.md").is_file()
 
 
 #: Largest module (lines) in the package: a longer one holds more than one job and is split.

@@ -29,9 +29,9 @@ def test_a_clone_reads_its_top_level_folders():
 def test_every_default_checkpoint_is_shipped():
     from opend_mj.policy.learned.affordance import DEFAULT_CHECKPOINT as CLIPORT
     from opend_mj.policy.learned.detector import DEFAULT_CHECKPOINT, SENSOR_CHECKPOINT
-    from opend_mj.sim.hands import BUILTIN_HANDS
+    from opend_mj.sim.hands import builtin_hands
 
-    names = [DEFAULT_CHECKPOINT, SENSOR_CHECKPOINT, CLIPORT, *(f"bc_{h}.pt" for h in BUILTIN_HANDS)]
+    names = [DEFAULT_CHECKPOINT, SENSOR_CHECKPOINT, CLIPORT, *(f"bc_{h}.pt" for h in builtin_hands())]
     assert [n for n in names if not resources.shipped_checkpoint(n).is_file()] == []
 
 

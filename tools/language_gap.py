@@ -21,8 +21,7 @@ from opend_mj.evaluation.jobs import make_jobs
 from opend_mj.evaluation.phrasings import assign_phrasings, load_instruction_file
 from opend_mj.evaluation.pool import run_jobs
 from opend_mj.language import InstructionNotUnderstood, canonical_instruction
-
-HANDS = ("franka", "allegro", "shadow", "skeleton")
+from opend_mj.sim.hands import list_hands
 
 
 def not_as_template(jobs) -> list:
@@ -48,7 +47,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--out", type=Path, required=True, help="folder for the results files")
     args = ap.parse_args()
-    hands = args.hand or list(HANDS)
+    hands = args.hand or list_hands()
     spec = load_instruction_file(args.instruction_file)
     args.out.mkdir(parents=True, exist_ok=True)
     for solver in args.solver:

@@ -19,9 +19,15 @@ import json
 import sys
 from pathlib import Path
 
-HANDS = ("franka", "allegro", "shadow", "skeleton")
+from opend_mj.sim.hands import list_hands
 #: the two criteria: the paper's open ratio > 20 %, ManiSkill3's >= 75 % of the joint range
 CRITERIA = (("open_ratio", 0.2, "> 20 %"), ("range_ratio", 0.75, ">= 75 % of range"))
+
+
+def in_order(hands) -> list[str]:
+    """``hands`` in the registry's order, unknown ones after it by name."""
+    known = list_hands()
+    return [h for h in known if h in hands] + sorted(set(hands) - set(known))
 
 
 def load(path: Path) -> dict[tuple, dict]:
@@ -51,7 +57,7 @@ def table(records: dict[tuple, dict], targets: int | None = None) -> list[str]:
     by_hand = collections.defaultdict(list)
     for r in records.values():
         by_hand[r["hand"]].append(r)
-    for hand in [h for h in HANDS if h in by_hand] + sorted(set(by_hand) - set(HANDS)):
+    for hand in in_order(by_hand):
         rs = by_hand[hand]
         n = targets or len(rs)
         cells = []
@@ -74,7 +80,7 @@ def changes(before: dict, after: dict) -> list[str]:
     """Per hand and criterion: episodes won and lost (in both files), with the lost ones named."""
     lines = []
     common = sorted(set(before) & set(after))
-    for hand in HANDS:
+    for hand in in_order({k[2] for k in common}):
         keys = [k for k in common if k[2] == hand]
         if not keys:
             continue

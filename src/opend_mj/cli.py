@@ -22,6 +22,7 @@ from opend_mj import __version__
 COMMANDS: dict[str, str] = {
     "generate": "opend_mj.commands.assets:generate",
     "build-assets": "opend_mj.commands.dataset:build_assets",
+    "hands": "opend_mj.commands.hands:hands",
     "render-hand": "opend_mj.commands.hands:render_hand",
     "run": "opend_mj.commands.evaluate:run",
     "score": "opend_mj.commands.evaluate:score",

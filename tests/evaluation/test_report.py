@@ -152,3 +152,48 @@ def test_report_points_between_two_runs_of_one_robustness_cell(tmp_path):
         "`results/real/robustness_all_depth_noise_cliport.json`.",
         "Also in another run (with its own nominal): `depth_noise` of cliport (allegro) in "
         "`results/real/robustness_all_cliport.json`."]
+
+
+def test_a_fifth_hand_is_one_folder(tmp_path, monkeypatch):
+    """Adding a hand is adding its folder: a copy of the shipped hands plus one more under another
+    name (its title and order in its spec.json), named by $OPEND_HANDS_DIR, is in the registry, in
+    `opend hands` and in the report's rows, titles and orderings; nothing else lists it."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from opend_mj.cli import main
+    from opend_mj.evaluation.report import results_markdown
+    from opend_mj.sim import hands
+
+    folder = tmp_path / "hands"
+    for name in hands.builtin_hands():
+        shutil.copytree(hands.HANDS_DIR / name, folder / name)
+    shutil.copytree(hands.HANDS_DIR / "allegro", folder / "lefty")
+    spec = json.loads((folder / "lefty" / "spec.json").read_text())
+    spec.update(name="lefty", title="Lefty hand", order=3)  # between allegro (2) and shadow (3): by name
+    (folder / "lefty" / "spec.json").write_text(json.dumps(spec))
+    monkeypatch.setenv(hands.HANDS_DIR_ENV, str(folder))
+    try:
+        assert hands.builtin_hands() == ["franka", "allegro", "lefty", "shadow", "skeleton"]
+        assert hands.list_hands()[:5] == hands.builtin_hands()
+        lefty = hands.get_hand("lefty")
+        assert lefty.title == "Lefty hand" and lefty.spec.dof == 16 and lefty.folder == (folder / "lefty").resolve()
+        listed = CliRunner().invoke(main, ["hands", "--names"])
+        assert listed.exit_code == 0 and listed.output.split()[:5] == hands.builtin_hands()
+        results = tmp_path / "results"
+        results.mkdir()
+        (results / "oracle_test.jsonl").write_text("".join(json.dumps(r) + "\n" for r in [
+            _record("c1", "joint_0", "lefty", "drawer", 0.9, 0.95), _record("c1", "joint_0", "shadow", "door", 0.1, 0.1),
+            _record("c1", "joint_0", "allegro", "door", 0.3, 0.9)]))
+        rows = [line.split(" | ")[0].lstrip("| ") for line in main_table(results).splitlines()[2:]]
+        assert rows == ["Franka gripper", "Allegro", "Lefty hand", "Shadow", "Skeleton"]
+        page = results_markdown(results)
+        detail = [line.split(" | ")[0].lstrip("| ") for line in page.split("## oracle boxes")[1].splitlines()
+                  if line.startswith("| ") and not line.startswith("| hand")]
+        assert detail[:3] == ["Allegro", "Lefty hand", "Shadow"]
+        assert "--hand allegro --hand lefty --hand shadow" in page
+    finally:
+        monkeypatch.delenv(hands.HANDS_DIR_ENV)
+        assert "lefty" not in hands.builtin_hands()  # back to the shipped hands
+    assert "lefty" not in hands.list_hands()

@@ -91,7 +91,7 @@ def _library_loaders():
     from opend_mj.policy.learned.bc import bundle_policies, load_policies, load_policy
     from opend_mj.policy.learned.bc_train import _warm_start
     from opend_mj.policy.learned.detector import load_detector
-    from opend_mj.policy.learned.train import _Loop, load_pretrained
+    from opend_mj.policy.learned.loop import TrainingLoop, load_pretrained
 
     return {
         "bc policy": lambda p: load_policy(p),
@@ -101,7 +101,7 @@ def _library_loaders():
         "CLIPort checkpoint": lambda p: load_affordance(p, "cpu"),
         "detector checkpoint": lambda p: load_detector(p, "cpu"),
         "train --init": lambda p: checkpoint_tensors(p),
-        "train --resume state": lambda p: _Loop("cliport", p.with_name("out.pt"), p, 1, None, False,
+        "train --resume state": lambda p: TrainingLoop("cliport", p.with_name("out.pt"), p, 1, None, False,
                                                 lambda s: None).resume(None, None, None),
         "train --pretrained": lambda p: load_pretrained(None, p, "cliport"),
     }

@@ -74,7 +74,7 @@ def test_metric_matching_with_depth_and_camera(front_view):
 
 
 def test_mirror_instruction():
-    from opend_mj.policy.learned.train import mirror_instruction
+    from opend_mj.policy.learned.train_cliport import mirror_instruction
 
     assert mirror_instruction("second top left door") == "second top right door"
     assert mirror_instruction("top middle drawer") == "top middle drawer"
@@ -173,7 +173,7 @@ def test_plain_views_show_the_cabinet_light_grey(tmp_path):
 def test_cliport_training_reduces_loss_and_solver_shapes(tiny_data, tmp_path):
     from opend_mj.policy.learned.affordance import AffordanceConfig, CLIPortSolver
     from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
-    from opend_mj.policy.learned.train import train_cliport
+    from opend_mj.policy.learned.train_cliport import train_cliport
 
     out, _ = tiny_data
     torch.manual_seed(0)
@@ -260,7 +260,7 @@ def test_pretrained_weights_load_from_a_local_file(tmp_path):
     import torchvision
 
     from opend_mj.policy.learned.affordance import AffordanceConfig, build_model
-    from opend_mj.policy.learned.train import load_pretrained
+    from opend_mj.policy.learned.loop import load_pretrained
 
     path = tmp_path / "resnet18.pth"
     ref = torchvision.models.resnet18(weights=None)
@@ -331,7 +331,7 @@ def test_the_shipped_detector_finds_the_handles_of_a_generated_image(tiny_data):
 
     from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
     from opend_mj.policy.learned.detector import FasterRCNNSolver
-    from opend_mj.policy.learned.train import iou
+    from opend_mj.policy.learned.loop import iou
 
     ckpt = Path(__file__).resolve().parents[2] / "checkpoints" / "fasterrcnn.pt"
     solver = FasterRCNNSolver(checkpoint=ckpt)
@@ -538,7 +538,7 @@ def test_cliport_training_can_read_a_real_sensors_depth(tiny_data):
     from opend_mj.policy.learned.affordance import AffordanceConfig
     from opend_mj.policy.learned.data import load_records
     from opend_mj.policy.learned.text import CachedEncoder
-    from opend_mj.policy.learned.train import _cliport_batch
+    from opend_mj.policy.learned.train_cliport import _cliport_batch
 
     data, _ = tiny_data
     recs = load_records(data)
@@ -773,3 +773,41 @@ def test_the_detectors_kind_calls_are_probabilities_where_it_sees_background(tin
     _, scored = detect_handles(model, rgb, boxes, depth=depth)
     assert np.all(scored.handle < 0.5)
     assert np.all((scored.kind >= 0) & (scored.kind <= 1)) and np.allclose(scored.kind.sum(1), 1.0, atol=1e-5)
+
+
+def test_opend_train_takes_the_trainer_from_the_solver_registry(tmp_path, monkeypatch):
+    """`opend train --solver S` trains and evaluates with S's trainer in the solver registry: its
+    defaults where the options give none, its configuration from the options."""
+    import json
+
+    from click.testing import CliRunner
+
+    from opend_mj.cli import main
+    from opend_mj.policy import solvers
+    from opend_mj.policy.learned import train_cliport, train_detector
+    from opend_mj.policy.learned.loop import Trainer
+
+    assert solvers.trainable_solvers() == ["fasterrcnn", "cliport"]
+    assert solvers.get_trainer("fasterrcnn") is train_detector.TRAINER
+    assert solvers.get_trainer("cliport") is train_cliport.TRAINER
+    calls = {}
+
+    def train(data_dir, out, config, **options):
+        calls.update(config=config, **options)
+        out.write_bytes(b"weights")
+        return {"history": [{"epoch": 1}]}
+
+    fake = Trainer(solver="cliport", epochs=7, batch_size=3, lr=0.5, config=train_cliport.config_from_options,
+                   train=train, evaluate=lambda checkpoint, data, subset, **kw: {"subset": subset, **kw})
+    monkeypatch.setitem(solvers._TRAINERS, "cliport", fake)
+    out = tmp_path / "c.pt"
+    result = CliRunner().invoke(main, ["train", "--solver", "cliport", "--out", str(out), "--fusion-layers", "2",
+                                       "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert (calls["epochs"], calls["batch_size"], calls["lr"]) == (7, 3, 0.5)
+    assert calls["config"].fusion_layers == 2 and calls["config"].fill_holes
+    result = CliRunner().invoke(main, ["train", "--solver", "cliport", "--out", str(out), "--evaluate", "val",
+                                       "--threshold", "0.5"])
+    assert json.loads(result.output.splitlines()[-1])["threshold"] == 0.5
+    with pytest.raises(KeyError, match="no trainer"):
+        solvers.get_trainer("oracle")

@@ -89,7 +89,7 @@ def test_training_instructions_can_be_grammar_rewordings():
 
     from opend_mj.language import canonical_instruction
     from opend_mj.policy.learned.text import CachedEncoder
-    from opend_mj.policy.learned.train import _encode_for_training, training_instruction
+    from opend_mj.policy.learned.train_cliport import _encode_for_training, training_instruction
 
     rng = random.Random(0)
     assert {training_instruction("top left drawer", rng, 0.0) for _ in range(20)} == {"top left drawer"}

@@ -168,14 +168,14 @@ def test_the_planner_keeps_its_episode_state_in_one_record():
 
     planner = Planner(solver=None, hand=None, config=PlannerConfig())
     assert isinstance(planner.state, EpisodeState) and planner.state.hinge is None
-    stages = {"front", "grasping", "approach", "kind", "flap", "slide", "pulling", "recovery"}
+    stages = {"front", "grasping", "approach", "kind", "flap", "slide", "pulling", "recovery", "takeover"}
     assert set(vars(planner)) == {"solver", "ctx"} | stages
     fresh = EpisodeState()
     planner.state = fresh
     for name in stages:
         stage = getattr(planner, name)
         assert isinstance(stage, Stage) and stage.episode is fresh and set(vars(stage)) <= {
-            "ctx", "solver", "front", "approach", "kind", "flap", "slide", "grasping"}
+            "ctx", "solver", "front", "approach", "kind", "flap", "slide", "grasping", "recovery"}
 
 
 def test_the_hinge_side_is_inferred_only_where_configured(door_plane):

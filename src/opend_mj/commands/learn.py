@@ -8,8 +8,16 @@ from pathlib import Path
 import click
 
 from opend_mj.policy.learned.detector import BACKBONES
+from opend_mj.policy.solvers import trainable_solvers
 
 DEFAULT_DATA = Path("out/handle-data")
+
+
+def _defaults(field: str) -> str:
+    """Each trainable solver's default ``field`` (epochs, batch_size, lr), for the options' help."""
+    from opend_mj.policy.solvers import get_trainer
+
+    return "[" + ", ".join(f"{name} {getattr(get_trainer(name), field):g}" for name in trainable_solvers()) + "]"
 
 
 @click.command("make-data")
@@ -43,15 +51,16 @@ def make_data(cabinets_dir, out, n_images, split, image_size, max_shift, colour_
 
 
 @click.command("train")
-@click.option("--solver", type=click.Choice(["fasterrcnn", "cliport"]), required=True)
+@click.option("--solver", type=click.Choice(trainable_solvers()), required=True,
+              help="A solver whose model is trained (its trainer in the solver registry).")
 @click.option("--data", "data_dir", type=click.Path(path_type=Path), default=DEFAULT_DATA, show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Checkpoint to write [checkpoints/<solver>.pt in the current folder, which the solver then loads before the shipped one].")
 @click.option("--state", type=click.Path(path_type=Path), default=None,
               help="Full training state for --resume [out/train/<name>.state.pt].")
-@click.option("--epochs", type=int, default=None, help="[fasterrcnn 6, cliport 10]")
-@click.option("--batch-size", type=int, default=None, help="[fasterrcnn 4, cliport 8]")
-@click.option("--lr", type=float, default=None, help="[fasterrcnn 5e-4, cliport 1e-3]")
+@click.option("--epochs", type=int, default=None, help=_defaults("epochs"))
+@click.option("--batch-size", type=int, default=None, help=_defaults("batch_size"))
+@click.option("--lr", type=float, default=None, help=_defaults("lr"))
 @click.option("--max-minutes", type=float, default=None, help="Stop (and save) after this much wall time.")
 @click.option("--resume", is_flag=True, help="Continue from the training state.")
 @click.option("--device", default=None, help="cpu / cuda [cuda when present].")
@@ -94,36 +103,22 @@ def train(solver, data_dir, out, state, epochs, batch_size, lr, max_minutes, res
     """Train a learned handle solver on `opend make-data` images."""
     import torch
 
-    from opend_mj.policy.learned import train as T
-    from opend_mj.policy.learned import train_detector as TD
+    from opend_mj.policy.solvers import get_trainer
 
+    trainer = get_trainer(solver)
     if threads:
         torch.set_num_threads(threads)
     out = out or Path(f"checkpoints/{solver}.pt")
     state = state or Path("out/train") / f"{out.stem}.state.pt"
     if evaluate_subset:
-        if solver == "cliport":
-            metrics = T.evaluate_cliport(out, data_dir, evaluate_subset, device=device, progress=progress)
-        else:
-            metrics = TD.evaluate_detector(out, data_dir, evaluate_subset, threshold=threshold, device=device,
-                                          progress=progress)
+        metrics = trainer.evaluate(out, data_dir, evaluate_subset, threshold=threshold, device=device, progress=progress)
         click.echo(json.dumps(metrics))
         return
-    common = dict(pretrained=pretrained, max_minutes=max_minutes, resume=resume, state_path=state, device=device, progress=progress)
-    if solver == "cliport":
-        from opend_mj.policy.learned.affordance import AffordanceConfig
-
-        cfg = AffordanceConfig(fusion_layers=int(fusion_layers), fusion=fusion, image_size=image_size,
-                               text_encoder=text_encoder, reword=reword, fill_holes=depth_noise == 0)
-        meta = T.train_cliport(data_dir, out, cfg, epochs=epochs or 10, batch_size=batch_size or 8, lr=lr or 1e-3,
-                               init=init, depth_noise=depth_noise, log=click.echo, **common)
-    else:
-        from opend_mj.policy.learned.detector import DetectorConfig
-
-        cfg = DetectorConfig(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size,
-                             max_size=max(min_size, 640) if min_size else None, kinds=kinds,
-                             depth=depth and backbone == "compact_fpn", context=context and backbone == "compact_fpn",
-                             relief_holes=depth_noise > 0, relief_denoise=depth_noise == 0)
-        meta = TD.train_fasterrcnn(data_dir, out, cfg, epochs=epochs or 6, batch_size=batch_size or 4, lr=lr or 5e-4,
-                                  init=init, depth_noise=depth_noise, log=click.echo, **common)
+    options = dict(backbone=backbone, box_head_dim=box_head_dim, min_size=min_size, kinds=kinds, depth=depth,
+                   context=context, fusion_layers=fusion_layers, fusion=fusion, image_size=image_size,
+                   text_encoder=text_encoder, reword=reword, depth_noise=depth_noise)
+    meta = trainer.train(data_dir, out, trainer.config(options), epochs=epochs or trainer.epochs,
+                         batch_size=batch_size or trainer.batch_size, lr=lr or trainer.lr, init=init,
+                         depth_noise=depth_noise, log=click.echo, pretrained=pretrained, max_minutes=max_minutes,
+                         resume=resume, state_path=state, device=device, progress=progress)
     click.echo(f"wrote {out} ({out.stat().st_size / 1e6:.1f} MB); last epoch: {json.dumps(meta['history'][-1])}")

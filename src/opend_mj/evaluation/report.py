@@ -16,8 +16,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-HANDS = ("franka", "allegro", "shadow", "skeleton")
-HAND_TITLES = {"franka": "Franka gripper", "allegro": "Allegro", "shadow": "Shadow", "skeleton": "Skeleton"}
 #: The paper's grasp success with ground-truth handle boxes (its Table 2), per hand, percent.
 PAPER_ORACLE = {"franka": 73.4, "allegro": 72.8, "shadow": 54.8, "skeleton": 50.8}
 #: The paper's end-to-end test success range over its handle solvers (its Table 3), percent.
@@ -26,6 +24,29 @@ PAPER_END_TO_END = "14.6-30.3"
 CRITERIA = (("open20", "open ratio > 20 %"), ("open50", "open ratio > 50 %"), ("range75", ">= 75 % of range"))
 README_BEGIN = "<!-- results-table:begin (written by `opend report`) -->"
 README_END = "<!-- results-table:end -->"
+
+
+def report_hands() -> list[str]:
+    """The hands the tables list, in their order: those of the hands folder, as the registry finds them
+    (`opend_mj.sim.hands.builtin_hands`; a hand registered in this process alone is not the benchmark's)."""
+    from opend_mj.sim.hands import builtin_hands
+
+    return builtin_hands()
+
+
+def hand_title(hand: str) -> str:
+    """A hand's name in the tables: its ``spec.json`` ``title`` (the name itself for an unknown hand)."""
+    from opend_mj.sim.hands import get_hand
+
+    try:
+        return get_hand(hand).title
+    except KeyError:
+        return hand
+
+
+def hand_flags() -> str:
+    """``--hand a --hand b ...`` for every hand of :func:`report_hands` (the commands the page names)."""
+    return " ".join(f"--hand {h}" for h in report_hands())
 
 
 def succeeded(record: dict, criterion: str) -> bool:
@@ -101,14 +122,15 @@ class ResultSet:
     title: str
     generated: str  # results/<name>.jsonl (records); a glob pattern reads every file it matches
     real: str  # results/real/<name>.json (aggregates); a glob pattern reads every file it matches
+    #: how the generated records were made (``{hands}``: :func:`hand_flags`)
     command: str
-    #: how the real records were made; default: `make eval-real SOLVER=<solver>`
+    #: how the real records were made (``{hands}`` as in ``command``); default: `make eval-real SOLVER=<solver>`
     real_command: str = ""
 
 
 RESULT_SETS = (
     ResultSet("oracle", "oracle boxes", "oracle_test.jsonl", "oracle_all.json",
-              "opend run --hand franka --hand allegro --hand shadow --hand skeleton --solver oracle --split test"),
+              "opend run {hands} --solver oracle --split test"),
     ResultSet("cliport", "CLIPort", "cliport_test.jsonl", "cliport_all.json",
               "... --solver cliport"),
     ResultSet("fasterrcnn", "Faster R-CNN", "fasterrcnn_test.jsonl", "fasterrcnn_all.json",
@@ -181,18 +203,18 @@ def main_table(results_dir: Path) -> str:
         header += [f"{rs.title}, generated", f"{rs.title}, real"]
     header.append("the paper: oracle / end to end")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for hand in HANDS:
-        row = [HAND_TITLES[hand]]
+    for hand in report_hands():
+        row = [hand_title(hand)]
         for rs, generated, real in columns:
             row += [_pair(generated, rs.solver, hand), _pair(real, rs.solver, hand)]
-        row.append(f"{PAPER_ORACLE[hand]} / {PAPER_END_TO_END}")
+        row.append(f"{PAPER_ORACLE.get(hand, '-')} / {PAPER_END_TO_END}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
 
 def _detail_table(scores: dict, solver: str) -> list[str]:
     lines = ["| hand | drawers | doors | overall | episodes |", "|---|---|---|---|---|"]
-    for hand in HANDS:
+    for hand in report_hands():
         cells = scores.get(solver, {}).get(hand)
         if not cells:
             continue
@@ -200,7 +222,7 @@ def _detail_table(scores: dict, solver: str) -> list[str]:
         for kind in ("drawer", "door", "overall"):
             c = cells.get(kind)
             parts.append(" / ".join(_rate(c, k) for k, _ in CRITERIA))
-        lines.append(f"| {HAND_TITLES[hand]} | " + " | ".join(parts) + f" | {cells['overall']['episodes']} |")
+        lines.append(f"| {hand_title(hand)} | " + " | ".join(parts) + f" | {cells['overall']['episodes']} |")
     return lines
 
 
@@ -225,13 +247,16 @@ def results_markdown(results_dir: Path) -> str:
         out += [f"## {rs.title}", ""]
         out += ["Cells: open ratio > 20 % / > 50 % / joint >= 75 % of its range.", ""]
         if generated:
-            out += [f"Generated test split (`{rs.command} --out results/{rs.generated.replace('*', 'HAND')}`):", ""]
+            command = rs.command.replace("{hands}", hand_flags())
+            out += [f"Generated test split (`{command} --out results/{rs.generated.replace('*', 'HAND')}`):", ""]
             out += _detail_table(generated, rs.solver) + [""]
         if real:
+            real_command = rs.real_command.replace("{hands}", hand_flags()) or (
+                f"make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl")
             out += [f"Real cabinets ({meta.get('cabinets')} cabinets, {meta.get('targets')} targets, "
                     f"{meta.get('excluded_targets', 0)} of them excluded by the build's feasibility check and "
                     f"counted as failures; "
-                    f"`{rs.real_command or f'make eval-real SOLVER={rs.solver}` then `opend score build/real-results/{rs.solver}_real.jsonl'} "
+                    f"`{real_command} "
                     f"--summary results/real/{rs.real.replace('*', 'HAND')} --manifest build/opend-train/manifest.json`):",
                     ""]
             out += _detail_table(real, rs.solver) + [""]
@@ -239,12 +264,13 @@ def results_markdown(results_dir: Path) -> str:
     for name, title in CONDITIONS:
         scores = _load_generated(results_dir / name)
         for solver, hands in scores.items():
-            cells = [_pair(scores, solver, h) if h in hands else "-" for h in HANDS]
+            cells = [_pair(scores, solver, h) if h in hands else "-" for h in report_hands()]
             rows.append(f"| {title} (`results/{name}`) | " + " | ".join(cells) + " |")
     if rows:
         out += ["## Conditions (generated test split)", "",
                 "`make results` regenerates every file. Cells: > 20 % / >= 75 % of range.", "",
-                "| condition | " + " | ".join(HAND_TITLES[h] for h in HANDS) + " |", "|---" * 5 + "|"]
+                "| condition | " + " | ".join(hand_title(h) for h in report_hands()) + " |",
+                "|---" * (len(report_hands()) + 1) + "|"]
         out += rows + [""]
     out += robustness_sections(results_dir)
     out += expert_sections(results_dir)

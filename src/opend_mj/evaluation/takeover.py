@@ -18,6 +18,7 @@ import numpy as np
 from opend_mj.evaluation.agents import PROTOCOL_TIME_LIMIT, episode_seed
 from opend_mj.evaluation.episode import EpisodeJob
 from opend_mj.evaluation.runner import instruction_for, make_episode_env
+from opend_mj.sim.hands import list_hands
 
 #: Leads of `opend expert-check` that are not agents: the planner itself.
 PLANNER_LEAD = "planner"
@@ -231,7 +232,7 @@ def load_takeovers(path: Path) -> dict:
 
 def takeover_markdown(summary: dict, title: str) -> list[str]:
     """A summary as a table: one row per lead and hand, a column per switch time (opened %, n)."""
-    hands = ("franka", "allegro", "shadow", "skeleton")
+    hands = list_hands()
     out = [f"### {title}", "", f"Made by: `{summary.get('command', 'opend expert-check')}` "
            f"({summary.get('cabinets')} cabinets, {summary.get('targets')} targets). Cells: opened (> 20 %) / "
            ">= 75 % of the range, in percent.", ""]

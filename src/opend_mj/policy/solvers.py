@@ -9,9 +9,11 @@ instruction ("second top left drawer"), ``camera_view`` an :class:`opend_mj.sim.
 (intrinsics and pose). ``None`` means "no handle found" (the episode fails at the locate stage).
 
 Solvers are made through a registry, ``get_solver(name, **options)``; a later module adds
-``fasterrcnn`` and ``cliport`` with :func:`register_solver`. The ``oracle`` solver returns the
-simulator's ground-truth box of the target handle; it gets that box through its constructor
-(``ground_truth``: a callable returning ``(u0, v0, u1, v1)`` or ``None``), never through globals.
+``fasterrcnn`` and ``cliport`` with :func:`register_solver`. The registry also names how a learned
+solver's model is trained (:func:`get_trainer`, :func:`register_trainer`: `opend train`). The
+``oracle`` solver returns the simulator's ground-truth box of the target handle; it gets that box
+through its constructor (``ground_truth``: a callable returning ``(u0, v0, u1, v1)`` or ``None``),
+never through globals.
 
 From an agent (`opend_mj.policy.agents`), :func:`locate` asks a shipped solver for the instructed
 handle in an observation and returns its box and world point as the planner would act on them::
@@ -86,6 +88,38 @@ def solver_factory(name: str) -> Callable[..., HandleSolver]:
         factory = getattr(importlib.import_module(module), attr)
         _REGISTRY[name] = factory
     return factory
+
+
+#: name -> how `opend train --solver <name>` trains its model: a
+#: :class:`~opend_mj.policy.learned.loop.Trainer` or "module:attribute" (imported on first use).
+_TRAINERS: dict[str, Any] = {
+    "fasterrcnn": "opend_mj.policy.learned.train_detector:TRAINER",  # writes checkpoints/fasterrcnn.pt
+    "cliport": "opend_mj.policy.learned.train_cliport:TRAINER",  # writes checkpoints/cliport.pt
+}
+
+
+def register_trainer(name: str, trainer: Any, *, overwrite: bool = False) -> None:
+    """Register how solver ``name``'s model is trained (a ``Trainer`` or "module:attr"); `opend train
+    --solver name` then offers it."""
+    if name in _TRAINERS and not overwrite and _TRAINERS[name] is not trainer:
+        raise ValueError(f"a trainer for solver {name!r} is already registered (pass overwrite=True)")
+    _TRAINERS[name] = trainer
+
+
+def trainable_solvers() -> list[str]:
+    """The solvers whose model `opend train` trains, in the order they were registered."""
+    return list(_TRAINERS)
+
+
+def get_trainer(name: str):
+    """The :class:`~opend_mj.policy.learned.loop.Trainer` of solver ``name``."""
+    if name not in _TRAINERS:
+        raise KeyError(f"no trainer for solver {name!r}; trainable: {', '.join(trainable_solvers())}")
+    trainer = _TRAINERS[name]
+    if isinstance(trainer, str):
+        module, attr = trainer.split(":")
+        trainer = _TRAINERS[name] = getattr(importlib.import_module(module), attr)
+    return trainer
 
 
 def needs_ground_truth(name: str) -> bool:

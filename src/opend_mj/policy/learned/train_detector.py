@@ -1,7 +1,7 @@
 """Training and validation of the Faster R-CNN handle detector (`opend train --solver fasterrcnn`).
 
-The loop shared with CLIPort's (:mod:`opend_mj.policy.learned.train`: float16 checkpoint after
-every epoch, full state for ``resume``, the best validation epoch kept); here what is the
+The loop shared with the other models is :mod:`opend_mj.policy.learned.loop` (float16 checkpoint
+after every epoch, full state for ``resume``, the best validation epoch kept); here what is the
 detector's own: its batches and augmentation (flips, colours, a real depth sensor's images), and its
 metric, target recall at IoU 0.5 after language matching, plus plain handle recall.
 """
@@ -19,9 +19,19 @@ from typing import Callable
 import numpy as np
 
 from opend_mj.policy.learned.data import camera_view_of, load_images, load_records
-from opend_mj.policy.learned.train import (SENSOR_LEVELS, _device, _Loop, _optimise,
-                                           _valid_targets, iou, load_pretrained, plot_history, sensor_augment,
-                                           sensor_view)
+from opend_mj.policy.learned.loop import (
+    SENSOR_LEVELS,
+    Trainer,
+    TrainingLoop,
+    iou,
+    load_pretrained,
+    optimise,
+    plot_history,
+    sensor_augment,
+    sensor_view,
+    torch_device,
+    valid_targets,
+)
 
 
 def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, dev, config=None,
@@ -29,7 +39,7 @@ def _detector_batch(data_dir, records, idx, augment: bool, rng: random.Random, d
     """Images and targets of a batch. Augmentation: horizontal flips; and with a depth channel, the
     colours shuffled, scaled or greyed out (a quarter of the images each), so the detector learns
     handles from their shape in depth as well as from their look; with chance ``depth_noise``, the
-    depth as a real sensor gives it (:func:`~opend_mj.policy.learned.train.sensor_augment`: noise
+    depth as a real sensor gives it (:func:`~opend_mj.policy.learned.loop.sensor_augment`: noise
     growing with distance, holes at edges and on dark surfaces), so that the relief channel is not
     trusted beyond what it holds."""
     import torch
@@ -91,7 +101,7 @@ def evaluate_detector_model(model, data_dir: Path, records: list[dict], threshol
         dets, _ = detect_handles(model, rgb, depth=depth)
         boxes = dets.boxes[dets.handle >= threshold]
         view = camera_view_of(rec)
-        for t in _valid_targets(rec):
+        for t in valid_targets(rec):
             found.append(any(iou(b, t["box"]) >= 0.5 for b in boxes))
             chosen = select_handle(dets, None, t["instruction"], depth, view, match)
             ok = chosen is not None and iou(chosen[0], t["box"]) >= 0.5
@@ -123,7 +133,7 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
 
     config = config or DetectorConfig()
     data_dir = Path(data_dir)
-    dev = _device(device)
+    dev = torch_device(device)
     torch.manual_seed(seed)
     rng = random.Random(seed)
     train_recs = [r for r in load_records(data_dir, "train")[:max_train]]
@@ -138,8 +148,8 @@ def train_fasterrcnn(data_dir: Path, out: Path, config=None, epochs: int = 10, b
     model = model.to(dev)
     params = [p for p in model.parameters() if p.requires_grad]
     steps_per_epoch = math.ceil(len(train_recs) / batch_size)
-    loop = _Loop("fasterrcnn", out, state_path, epochs, max_minutes, progress, log)
-    opt, sched = _optimise(loop, model, params, lr, epochs, steps_per_epoch, 0.1, resume)
+    loop = TrainingLoop("fasterrcnn", out, state_path, epochs, max_minutes, progress, log)
+    opt, sched = optimise(loop, model, params, lr, epochs, steps_per_epoch, 0.1, resume)
     log(f"fasterrcnn ({config.backbone}): {len(train_recs)} train images, {len(val_recs)} validation images, "
         f"device {dev}, {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters")
     for epoch in range(loop.start_epoch, epochs):
@@ -215,3 +225,21 @@ def evaluate_detector(checkpoint: Path, data_dir: Path, subset: str = "val", thr
         threshold = float(ckpt.get("threshold", 0.8))
     out = evaluate_detector_model(model, Path(data_dir), load_records(data_dir, subset)[:limit], threshold, progress)
     return {"subset": subset, "threshold": threshold, **out}
+
+
+def config_from_options(options: dict):
+    """The detector's configuration from `opend train`'s options (depth and context only for the
+    ``compact_fpn`` backbone)."""
+    from opend_mj.policy.learned.detector import DetectorConfig
+
+    backbone, min_size, noise = options["backbone"], options["min_size"], options["depth_noise"]
+    return DetectorConfig(backbone=backbone, box_head_dim=options["box_head_dim"], min_size=min_size,
+                          max_size=max(min_size, 640) if min_size else None, kinds=options["kinds"],
+                          depth=options["depth"] and backbone == "compact_fpn",
+                          context=options["context"] and backbone == "compact_fpn",
+                          relief_holes=noise > 0, relief_denoise=noise == 0)
+
+
+#: `opend train --solver fasterrcnn`.
+TRAINER = Trainer(solver="fasterrcnn", epochs=6, batch_size=4, lr=5e-4, config=config_from_options,
+                  train=train_fasterrcnn, evaluate=evaluate_detector)

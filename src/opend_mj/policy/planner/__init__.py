@@ -19,8 +19,8 @@ planner sees, chooses and keeps), :mod:`.robot` (the environment adapter), :mod:
 every stage is given), :mod:`.loop` (:class:`Planner`: the short loop over the stages), the stages
 :mod:`.grasp` (:class:`Grasping`), :mod:`.approach` (:class:`Approach`: approach, close, verify),
 :mod:`.pull` (:class:`Pulling`) with :mod:`.flap` and :mod:`.slide` (its variants), :mod:`.kind`
-(:class:`KindCheck`, :class:`FrontWatch`), :mod:`.recovery` (:class:`PushRecovery`), and the
-helpers :mod:`.moves` and :mod:`.clearance`. A hand's own numbers (``planner.json``,
+(:class:`KindCheck`, :class:`FrontWatch`), :mod:`.recovery` (:class:`PushRecovery`), :mod:`.takeover`
+(:class:`TakeOver`: an episode taken over mid-way), and the helpers :mod:`.moves` and :mod:`.clearance`. A hand's own numbers (``planner.json``,
 ``grasp.json``) come with its :class:`~opend_mj.sim.hands.HandModel`.
 """
 
@@ -49,11 +49,13 @@ from opend_mj.policy.planner.records import (
     PartMotion,
     PlanResult,
     PullState,
+    StageOutcome,
 )
 from opend_mj.policy.planner.recovery import PushRecovery, fit_circle_xy
 from opend_mj.policy.planner.robot import Robot
 from opend_mj.policy.planner.slide import PanelSliding
 from opend_mj.policy.planner.stage import Stage, StageContext
+from opend_mj.policy.planner.takeover import TakeOver
 from opend_mj.sim.hands import GRASP_FILE, PLANNER_FILE, GraspProfile, HandPlannerConfig
 
 __all__ = [
@@ -61,5 +63,5 @@ __all__ = [
     "FlapSteering", "FrontWatch", "GraspChoice", "GraspConfig", "GraspProfile", "Grasping", "HandPlannerConfig",
     "KindCheck", "KindConfig", "LocateConfig", "Observation", "PanelSliding", "PartMotion", "PlanResult", "Planner",
     "PlannerConfig", "PullConfig", "PullState", "Pulling", "PushRecovery", "RecoveryConfig", "Robot", "Stage",
-    "StageContext", "VerifyConfig", "fit_circle_xy",
+    "StageContext", "StageOutcome", "TakeOver", "VerifyConfig", "fit_circle_xy",
 ]

@@ -8,8 +8,6 @@ import math
 from dataclasses import replace
 from typing import Callable
 
-import numpy as np
-
 from opend_mj.language import InstructionNotUnderstood, target_kind
 from opend_mj.policy.handle import NO_HANDLE, HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
@@ -24,21 +22,21 @@ from opend_mj.policy.planner.config import PlannerConfig
 from opend_mj.policy.planner.flap import FlapSteering
 from opend_mj.policy.planner.grasp import Grasping
 from opend_mj.policy.planner.kind import FrontWatch, KindCheck
-from opend_mj.policy.planner.moves import hold, move, unyawed
+from opend_mj.policy.planner.moves import hold, move
 from opend_mj.policy.planner.pull import Pulling
 from opend_mj.policy.planner.records import (
     EpisodeState,
-    Flap,
-    GraspChoice,
     Observation,
     PartMotion,
     PlanResult,
     PullState,
+    StageOutcome,
 )
 from opend_mj.policy.planner.recovery import PushRecovery
 from opend_mj.policy.planner.robot import new_depth
 from opend_mj.policy.planner.slide import PanelSliding
 from opend_mj.policy.planner.stage import Stage, StageContext
+from opend_mj.policy.planner.takeover import TakeOver
 from opend_mj.sim.hands import HandModel, HandPlannerConfig, HandSpec, get_hand
 from opend_mj.transforms import quat_axis_z
 
@@ -47,9 +45,6 @@ from opend_mj.transforms import quat_axis_z
 RELEASE_HOLD = 0.2
 RELEASE_OPEN = 0.4
 RELEASE_BACKOFF = 0.08
-#: An episode taken over with its part open this share of its range or more is done (the benchmark's
-#: second criterion already holds; pulling on from a wide angle, near its stop, would drag a door shut).
-TAKEN_OVER_OPEN = 0.75
 #: A grip never held beyond this much pull travel (m) is the grasp's failure, not the pull's.
 GRASP_FAILED_TRAVEL = 0.03
 
@@ -91,8 +86,9 @@ class Planner(Stage):
     (:class:`~.pull.Pulling`, with its ``flap`` and ``slide`` variants), ``kind``
     (:class:`~.kind.KindCheck`: a handle whose pull shows the other kind than the instruction's is
     taken back, let go, and the solver asked again), ``recovery`` (:class:`~.recovery.PushRecovery`:
-    a lost door pushed open from inside); ``front`` (:class:`~.kind.FrontWatch`) is the camera's
-    second look that several of them use.
+    a lost door pushed open from inside), ``takeover`` (:class:`~.takeover.TakeOver`: an episode
+    taken over mid-way); ``front`` (:class:`~.kind.FrontWatch`) is the camera's second look that
+    several of them use. Each handle's attempt ends in a :class:`~.records.StageOutcome`.
 
     ``hand``: the hand (a :class:`~opend_mj.sim.hands.HandModel`, or a bare
     :class:`~opend_mj.sim.hands.HandSpec` whose registered hand supplies the planner's numbers);
@@ -116,6 +112,7 @@ class Planner(Stage):
         self.slide = PanelSliding(self.ctx)
         self.pulling = Pulling(self.ctx, self.approach, self.kind, self.front, self.flap, self.slide)
         self.recovery = PushRecovery(self.ctx, self.grasping, self.front)
+        self.takeover = TakeOver(self.ctx, self.approach, self.flap, self.recovery)
 
     @Stage.config.setter
     def config(self, config: PlannerConfig) -> None:
@@ -157,7 +154,6 @@ class Planner(Stage):
         wherever another agent left it, and the instructed part has moved by ``motion`` since that
         image. The grasp chosen in the image moves with its part; a hand that already holds the
         handle goes on pulling it, any other approaches it from where it is."""
-        cfg = self.config
         result = PlanResult(stage_reached="locate", failed_stage=None)
         self.state = EpisodeState(first=obs)  # the image a pulled front's motion is measured against
         try:
@@ -174,43 +170,42 @@ class Planner(Stage):
             self._hold_until_min_time(robot, None)
             return result
         while True:
-            status, state, grasp = self.open_handle(robot, obs, handle, box, result, motion)
+            outcome, state, grasp = self.open_handle(robot, obs, handle, box, result, motion)
             motion = None  # a handle asked for again is approached as at an episode's start
-            if status == "no_handle":  # the fingers closed on nothing there: ask for another box
-                m = cfg.kind.empty_margin
-                u0, v0, u1, v1 = box.as_tuple()
-                observed = observed + (((u0 - m, v0 - m, u1 + m, v1 + m), NO_HANDLE),)
-                status = "not_held"
-                if not self._retarget(robot, observed):
-                    break
-                result.no_handle.append([round(x, 2) for x in box.as_tuple()])
-                new_handle, new_box = self.locate(robot, obs, result, observed)
-                if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
-                    break
-                handle, box = new_handle, new_box
-                continue
-            if status != "wrong_kind":
+            if outcome not in (StageOutcome.NO_HANDLE, StageOutcome.WRONG_KIND):
                 break
-            # the handle moved as the other kind: push it back, let go, ask the solver again
-            seen = state.seen_kind
-            observed = observed + ((box.as_tuple(), seen),)
-            result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
-                                      "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
-            self.kind.push_back(robot, grasp, state)
+            # this handle is given up: the episode ends not held unless the solver gives another one
+            given_up, outcome = outcome, StageOutcome.NOT_HELD
+            observed = observed + (self._give_up(robot, given_up, box, state, grasp, result),)
             if not self._retarget(robot, observed):
-                status = "not_held"
                 break
+            if given_up is StageOutcome.NO_HANDLE:
+                result.no_handle.append([round(x, 2) for x in box.as_tuple()])
             new_handle, new_box = self.locate(robot, obs, result, observed)
             if new_handle is None or centres_overlap([new_box.as_tuple()], [b for b, _ in observed]).any():
-                status = "not_held"
                 break
-            self._look_again(robot, obs)  # only where another handle is pulled
+            if given_up is StageOutcome.WRONG_KIND:
+                self._look_again(robot, obs)  # only where another handle is pulled
             handle, box = new_handle, new_box
         result.pulled = state.travelled
         result.turned_deg = state.turned
         result.grasp_style = grasp.style
-        self._finish(robot, status, grasp, result)
+        self._finish(robot, outcome, grasp, result)
         return result
+
+    def _give_up(self, robot, outcome: StageOutcome, box, state: PullState, grasp, result: PlanResult) -> tuple:
+        """A handle given up (``NO_HANDLE``: the fingers closed on nothing there; ``WRONG_KIND``: it
+        moved as the other kind, so it is pushed back and let go, and recorded): its (box, kind) for
+        the solver to leave out, a box with nothing in it grown by ``kind.empty_margin``."""
+        if outcome is StageOutcome.NO_HANDLE:
+            m = self.config.kind.empty_margin
+            u0, v0, u1, v1 = box.as_tuple()
+            return (u0 - m, v0 - m, u1 + m, v1 + m), NO_HANDLE
+        seen = state.seen_kind
+        result.wrong_kind.append({"box": [round(x, 2) for x in box.as_tuple()], "kind": seen,
+                                  "by": state.seen_by, "turn_deg": round(state.seen_turn, 1)})
+        self.kind.push_back(robot, grasp, state)
+        return box.as_tuple(), seen
 
     def _retarget(self, robot, observed: tuple) -> bool:
         """Whether another handle may be asked for after the ``observed`` ones were given up: fewer
@@ -219,12 +214,13 @@ class Planner(Stage):
         return (len(observed) < cfg.max_target_tries and self._time_left(robot) >= cfg.retarget_time
                 and getattr(self.solver, "accepts_observed", False))
 
-    def _finish(self, robot, status: str, grasp, result: PlanResult) -> None:
+    def _finish(self, robot, outcome: StageOutcome, grasp, result: PlanResult) -> None:
         """Hold (closed where the pull finished, else open; released where ``release``) until
         ``min_time``, then the planner's own verdict."""
         site, squat = robot.site_pose()
-        fingers = grasp.closed if status == "done" else self.spec.pregrasp_profile(grasp.orientation)
-        if self.config.release and status == "done":
+        done = outcome is StageOutcome.DONE
+        fingers = grasp.closed if done else self.spec.pregrasp_profile(grasp.orientation)
+        if self.config.release and done:
             pre = self.spec.pregrasp_profile(grasp.orientation)
             hold(robot, site, squat, grasp.closed, RELEASE_HOLD)
             hold(robot, site, squat, pre, RELEASE_OPEN)
@@ -234,9 +230,9 @@ class Planner(Stage):
         self._hold_until_min_time(robot, (robot.site_pose()[0], robot.site_pose()[1], fingers))
         self._stage(result, "check", pulled=round(result.pulled, 4), turned_deg=round(result.turned_deg, 2),
                     regrasps=result.regrasps)
-        if status == "not_held" and result.pulled < GRASP_FAILED_TRAVEL and not result.pushed:
+        if outcome is StageOutcome.NOT_HELD and result.pulled < GRASP_FAILED_TRAVEL and not result.pushed:
             result.failed_stage = "grasp"
-        elif status != "done" and not result.pushed:
+        elif not done and not result.pushed:
             result.failed_stage = "pull"
 
     def _look_again(self, robot, obs: Observation) -> None:
@@ -247,11 +243,12 @@ class Planner(Stage):
         if depth is not None:
             self.state.first = replace(obs, depth=depth)
 
-    def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult, motion: PartMotion | None = None):
-        """Perceive, grasp and pull one handle, grasping again where the grip is lost: (status,
-        pull state, last grasp); status "done", "slipped", "not_held", "no_handle" (every grasp closed
-        on air, nothing moved: no handle there) or "wrong_kind" (its motion
-        showed the other kind than the instruction's). ``motion``: see :meth:`run`."""
+    def open_handle(self, robot, obs: Observation, handle, box, result: PlanResult,
+                    motion: PartMotion | None = None) -> tuple[StageOutcome, PullState, object]:
+        """Perceive, grasp and pull one handle, grasping again where the grip is lost: (outcome, pull
+        state, last grasp). The outcome is ``DONE``, ``SLIPPED``, ``NOT_HELD``, ``NO_HANDLE`` (every
+        grasp closed on air, nothing moved: no handle there) or ``WRONG_KIND`` (its motion showed the
+        other kind than the instruction's). ``motion``: see :meth:`run` (:class:`~.takeover.TakeOver`)."""
         cfg = self.config
         self.state.handle = handle
         self.state.felt = False
@@ -261,15 +258,10 @@ class Planner(Stage):
         state = PullState(quat0=grasp.quat)
         held = False
         if motion is not None:
-            start = grasp.pos
-            grasp, held = self._taken_over(robot, grasp, motion, state, result)
-            if (motion.angle_deg >= cfg.pulling.door_done_deg if door else state.travelled >= cfg.pulling.drawer_done) \
-                    or (motion.share is not None and motion.share >= TAKEN_OVER_OPEN):
-                return "done", state, grasp  # the part is as open as a finished pull leaves it
-            if door and not held and cfg.recovery.push_recovery and self._door_turned(motion, start, state) \
-                    and self.recovery.recover_door(robot, state, result):
-                return "not_held", state, grasp  # a door left ajar is pushed open from inside, as a lost one
-        status = "not_held"
+            taken, grasp, held = self.takeover.resume(robot, grasp, motion, door, state, result)
+            if taken is not None:
+                return taken, state, grasp
+        outcome = StageOutcome.NOT_HELD
         for attempt in range(cfg.recovery.max_grasp_tries):
             if attempt > 0 and self._time_left(robot) < cfg.recovery.attempt_time:
                 break
@@ -280,103 +272,42 @@ class Planner(Stage):
                 self.approach.approach(robot, grasp, result, first=attempt == 0 and not result.wrong_kind,
                                        from_here=attempt == 0 and motion is not None)
                 if not self.approach.close_and_verify(robot, grasp, result):
-                    status = "not_held"
+                    outcome = StageOutcome.NOT_HELD
                     self.approach.back_off(robot, grasp)
                     grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
                     continue
-            status = self.pulling.pull(robot, grasp, door, state, result)
-            if status == "wrong_kind":
-                return status, state, grasp
-            if status == "stuck":  # a drawer that did not come out: slide it along its front
-                status = "slipped"
+            outcome = self.pulling.pull(robot, grasp, door, state, result)
+            if outcome is StageOutcome.WRONG_KIND:
+                return outcome, state, grasp
+            if outcome is StageOutcome.STUCK:  # a drawer that did not come out: slide it along its front
+                outcome = StageOutcome.SLIPPED
                 if not self.slide.next_slide(state, result):
                     break
-            if status == "slipped" and (self.recovery.swung(state) >= cfg.pulling.door_done_deg if door
-                                        else state.travelled >= cfg.pulling.drawer_done):
-                status = "done"  # lost at the end of the travel (the part's stop pulled the hand off)
-            if status == "done":
+            if outcome is StageOutcome.SLIPPED and (self.recovery.swung(state) >= cfg.pulling.door_done_deg if door
+                                                    else state.travelled >= cfg.pulling.drawer_done):
+                outcome = StageOutcome.DONE  # lost at the end of the travel (the part's stop pulled the hand off)
+            if outcome is StageOutcome.DONE:
                 break
-            if door and cfg.recovery.push_recovery:
-                arc = self.recovery.door_arc(state)
-                flap = self.recovery.flap_arc(state)
-                if arc is not None and math.degrees(arc[4]) >= cfg.recovery.push_min_turn \
-                        or flap is not None and math.degrees(flap[2]) >= cfg.recovery.flap_push_min_deg:
-                    self.approach.back_off(robot, grasp)
-                    break  # an opened door is pushed open from inside (below), not grasped again
+            if door and cfg.recovery.push_recovery and self._door_opened(state):
+                self.approach.back_off(robot, grasp)
+                break  # an opened door is pushed open from inside (below), not grasped again
             self.approach.back_off(robot, grasp)
             grasp = self.grasping.next_grasp(grasp, handle, shape, state, result)
-        if door and status != "done" and cfg.recovery.push_recovery:
+        if door and outcome is not StageOutcome.DONE and cfg.recovery.push_recovery:
             self.recovery.recover_door(robot, state, result)
-        if status == "not_held" and not self.state.felt and not held and not result.pushed \
+        if outcome is StageOutcome.NOT_HELD and not self.state.felt and not held and not result.pushed \
                 and state.travelled < GRASP_FAILED_TRAVEL:
-            return "no_handle", state, grasp  # every grasp closed on air: no handle in this box
-        return status, state, grasp
+            return StageOutcome.NO_HANDLE, state, grasp  # every grasp closed on air: no handle in this box
+        return outcome, state, grasp
 
-    def _taken_over(self, robot, grasp: GraspChoice, motion: PartMotion, state: PullState, result: PlanResult):
-        """An episode taken over mid-way: the grasp chosen in the first image moved with its part
-        (``motion``), the pull's travel so far (m) taken from the part's slide or the grasp point's
-        path, and whether the hand already holds the handle (:meth:`Approach.holds`). Returns
-        (the moved grasp, held)."""
-        pos = motion.point(grasp.pos)
-        moved = replace(grasp, pos=pos, quat=motion.orientation(grasp.quat),
-                        probe=None if grasp.probe is None else motion.rot @ np.asarray(grasp.probe, float))
-        state.travelled = float(np.linalg.norm(pos - grasp.pos))
-        out = motion.rot @ state.base_dir
-        out[2] = 0.0
-        if result.target_kind == "door" and np.linalg.norm(out) > 1e-6:  # a door: the pull goes on along its turn
-            out = out / np.linalg.norm(out)
-            b = state.base_dir
-            state.direction = out
-            state.turned = state.peak_turn = math.degrees(math.atan2(b[0] * out[1] - b[1] * out[0], float(b @ out)))
-            if motion.angle_deg > 2.0:
-                # the camera's flap looks compare the front with the first image, in which this door was
-                # still closed: the motion tells a side door from a flap instead
-                state.flap_looked = len(self.config.door.flap_look_distances)
-                if not motion.upright:  # turned about a level hinge: a flap, hinged above or below the grasp
-                    start = np.asarray(grasp.pos, float)
-                    sign = 1.0 if motion.pivot[2] > start[2] else -1.0
-                    state.flap = Flap(start=start, out=state.base_dir.copy(), sign=sign,
-                                      reach=abs(float(motion.pivot[2] - start[2])))
-                    state.hinge = None
-                    state.direction, state.turned, state.peak_turn = state.base_dir.copy(), 0.0, 0.0
-                elif self.config.door.hinge_pull:  # a side door: the pull goes on about its hinge
-                    hinge = np.asarray(motion.pivot[:2], float)
-                    self.state.hinge = hinge
-                    Pulling._turn_about(state, hinge, np.asarray(grasp.pos[:2], float) - hinge)
-        held = self.approach.holds(robot, moved)
-        targets = getattr(robot, "finger_targets", None)
-        if held and targets is not None:
-            # a held handle is pulled on as it is held: the hand's orientation and finger targets kept
-            # (turning the hand or changing its grip on a part that moves with it would throw the part)
-            quat = robot.site_pose()[1]
-            door = self.config.door
-            ang = state.turned
-            if state.flap is not None:  # a flap's pull pitches the grasp's orientation by the flap's angle
-                tilt = self.flap.tilt_at(robot.site_pos(), state)
-                state.quat0 = unyawed(door, state, quat, 0.0, tilt)
-            else:
-                state.quat0 = unyawed(door, state, quat, ang)  # so that the pull's yaw starts at it
-            moved = replace(moved, quat=quat, closed=np.array(targets(), float))
-        self.state.taken_over = {"turned_deg": round(motion.angle_deg, 1), "slid": round(motion.distance, 4),
-                                 "held": held, "style": moved.style}
-        result.events.append({"taken_over": self.state.taken_over})
-        return moved, held
-
-    def _door_turned(self, motion: PartMotion, start, state: PullState) -> bool:
-        """Whether a door taken over turned about an upright hinge at least ``push_min_turn`` (deg);
-        if so, the handle's path from ``start`` (its grasp point in the first image) along that turn
-        becomes the pull's held track, from which the push recovery finds the door's arc."""
-        rot = motion.rot
-        if not motion.upright or motion.angle_deg < self.config.recovery.push_min_turn:
-            return False
-        turn = math.atan2(rot[1, 0], rot[0, 0])
-        pivot = motion.pivot
-        state.track = []
-        for f in np.linspace(0.0, 1.0, 12):
-            c, s = math.cos(f * turn), math.sin(f * turn)
-            r = np.asarray(start, float) - pivot
-            state.track.append(pivot + np.array([c * r[0] - s * r[1], s * r[0] + c * r[1], r[2]]))
-        return True
+    def _door_opened(self, state: PullState) -> bool:
+        """Whether a lost door's held path shows it opened enough to be pushed open from inside: an
+        arc of ``push_min_turn`` (deg) or more, or a flap's of ``flap_push_min_deg`` or more."""
+        cfg = self.config.recovery
+        arc = self.recovery.door_arc(state)
+        flap = self.recovery.flap_arc(state)
+        return arc is not None and math.degrees(arc[4]) >= cfg.push_min_turn \
+            or flap is not None and math.degrees(flap[2]) >= cfg.flap_push_min_deg
 
     def locate(self, robot, obs: Observation, result: PlanResult, observed: tuple = ()):
         """The solver's box (snapped to the handle in depth for learned solvers) -> 3D handle;

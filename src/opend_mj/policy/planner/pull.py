@@ -17,19 +17,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from opend_mj.policy.planner.moves import kept_down, yawed
-from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState
+from opend_mj.policy.planner.records import GraspChoice, PlanResult, PullState, StageOutcome
 from opend_mj.policy.planner.stage import Stage, StageContext
 
 #: Seconds a pull may last beyond the time its remaining travel needs at the pull speed.
 PULL_SLACK_TIME = 3.0
 
 
-def _ended(result: PlanResult, state: PullState, status: str, why: str) -> str:
+def _ended(result: PlanResult, state: PullState, outcome: StageOutcome, why: str | StageOutcome) -> StageOutcome:
     """Record why a pull ended (``{"pull_end": why, ...}``: "stall", "travel", "back_stop", "time",
-    "steps", "slipped" or "wrong_kind") with its travel (m) and turn (deg); returns ``status``."""
+    "steps", or the outcome's word: "slipped", "stuck", "wrong_kind") with its travel (m) and turn
+    (deg); returns ``outcome``."""
+    why = why.value if isinstance(why, StageOutcome) else why
     result.events.append({"pull_end": why, "travelled": round(state.travelled, 4), "turned": round(state.turned, 1),
                           "tilt": round(state.peak_tilt, 1)})
-    return status
+    return outcome
 
 
 @dataclass
@@ -68,12 +70,12 @@ class Pulling(Stage):
         self.flap = flap
         self.slide = slide
 
-    def pull(self, robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> str:
-        """Pull until the part is open ("done") or stalls ("done"), or the grip is lost ("slipped":
-        the hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did),
-        or the held handle showed the other kind than the instruction's ("wrong_kind"), or a
+    def pull(self, robot, g: GraspChoice, door: bool, state: PullState, result: PlanResult) -> StageOutcome:
+        """Pull until the part is open or stalls (``DONE``), or the grip is lost (``SLIPPED``: the
+        hand touched nothing for ``slip_time`` and moved ``slip_distance`` since it last did), or
+        the held handle showed the other kind than the instruction's (``WRONG_KIND``), or a
         drawer's handle did not come along this direction (it stalled, or the hand came off it,
-        within ``drawer_stuck_travel``: "stuck")."""
+        within ``drawer_stuck_travel``: ``STUCK``)."""
         cfg = self.config.pulling
         self.ctx.enter(result, "pull", attempt=g.attempt)
         dt = robot.control_dt
@@ -88,21 +90,21 @@ class Pulling(Stage):
             self._start_hinge_pull(state, start, result)
         for k in range(max_steps):
             if self.ctx.time_left(robot) <= 0.0:
-                return _ended(result, state, "done", "time")
+                return _ended(result, state, StageOutcome.DONE, "time")
             site = robot.site_pos()
-            status = self._grip_check(robot, site, run, state, result)
-            if status is not None:
-                return _ended(result, state, status, status)
+            lost = self._grip_check(robot, site, run, state, result)
+            if lost is not None:
+                return _ended(result, state, lost, lost)
             run.history.append(site.copy())
             if door:
                 self._steer_door(robot, site, run, state, result)
             self._advance(robot, site, run, g, state, dt)
             why = self._pull_finished(robot, k, run, state, result, travel_max, stall_n)
             if why == "stall" and not door and cfg.drawer_slide and self._did_not_come(robot, run, state, site):
-                return _ended(result, state, "stuck", "stuck")
+                return _ended(result, state, StageOutcome.STUCK, StageOutcome.STUCK)
             if why is not None:
-                return _ended(result, state, "done", why)
-        return _ended(result, state, "done", "steps")
+                return _ended(result, state, StageOutcome.DONE, why)
+        return _ended(result, state, StageOutcome.DONE, "steps")
 
     def _did_not_come(self, robot, run: PullRun, state: PullState, site) -> bool:
         """Whether a drawer did not come out with the hand along this direction (it slides another
@@ -122,16 +124,16 @@ class Pulling(Stage):
         return not run.front_moved
 
     # ---------------------------------------------------------------- one control step
-    def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> str | None:
-        """"slipped" where the grip is lost (the fingers forced open, or no touch for a while and the
-        hand moved away), "wrong_kind" where the held path shows the other kind, else None; records
-        the held track."""
+    def _grip_check(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> StageOutcome | None:
+        """``SLIPPED`` where the grip is lost (the fingers forced open, or no touch for a while and
+        the hand moved away), ``STUCK`` where the hand came off a drawer that did not come with it,
+        ``WRONG_KIND`` where the held path shows the other kind, else None; records the held track."""
         cfg = self.config
         tolerance = self.hand.grip_lost_change
         if tolerance is not None and float(np.max(np.abs(robot.finger_qpos() - run.grip))) > tolerance:
             # the handle forced the fingers open: the grip is lost
             result.events.append({"grip_lost_at": round(state.travelled, 4)})
-            return "slipped"
+            return StageOutcome.SLIPPED
         if not cfg.verify.verify_grasp:
             return None
         held, touch = self.approach.holding(robot)
@@ -144,9 +146,9 @@ class Pulling(Stage):
         if run.quiet >= slip_n and away >= cfg.pulling.slip_distance:
             if run.door or cfg.pulling.drawer_slips:
                 result.events.append({"slipped_at": round(state.travelled, 4), "turned": round(state.turned, 1)})
-                return "slipped"
+                return StageOutcome.SLIPPED
             if cfg.pulling.drawer_slide and self._did_not_come(robot, run, state, site):
-                return "stuck"  # the hand came off a drawer that did not come with it
+                return StageOutcome.STUCK  # the hand came off a drawer that did not come with it
         if held:
             state.last_held = (site.copy(), run.quat.copy())
             if len(state.track) > state.pull_start:
@@ -157,7 +159,7 @@ class Pulling(Stage):
                 if verdict is not None:
                     run.watch_kind = False
                     if verdict:
-                        return "wrong_kind"
+                        return StageOutcome.WRONG_KIND
         return None
 
     def _steer_door(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
@@ -324,7 +326,7 @@ class Pulling(Stage):
             return
         if abs(r[1]) / radius < 0.5:  # the handle is not beside its hinge in the door's plane (> 60 deg off)
             return
-        self._turn_about(state, hinge, r)
+        self.turn_about(state, hinge, r)
         result.events.append({"hinge_pull": {"hinge": [round(float(v), 3) for v in seen], "radius": round(radius, 3)}})
 
     def _hinge_looked(self, robot, site, run: PullRun, state: PullState, result: PlanResult) -> None:
@@ -366,12 +368,13 @@ class Pulling(Stage):
         result.events.append({"hinge_seen_turning": {"hinge": [round(float(v), 3) for v in seen],
                                                      "was": [round(float(v), 3) for v in state.hinge],
                                                      "radius": round(radius, 3), "across": front["across"]}})
-        self._turn_about(state, seen, r)
+        self.turn_about(state, seen, r)
 
     @staticmethod
-    def _turn_about(state: PullState, hinge: np.ndarray, r: np.ndarray) -> None:
+    def turn_about(state: PullState, hinge: np.ndarray, r: np.ndarray) -> None:
         """Pull along the circle about ``hinge`` (x, y; m) through the point ``hinge + r``: the sense
-        whose tangent there leaves the cabinet (-x) and the angle (rad) the circle starts at."""
+        whose tangent there leaves the cabinet (-x) and the angle (rad) the circle starts at (also
+        where a pull goes on about a taken-over door's hinge: :class:`~.takeover.TakeOver`)."""
         state.hinge = hinge
         state.sense = -1.0 if r[1] < 0 else 1.0  # the tangent (-r_y, r_x) / |r| that leaves the cabinet (-x)
         state.angle0 = math.atan2(r[1], r[0])

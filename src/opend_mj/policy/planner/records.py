@@ -6,6 +6,7 @@ Units: metres, radians in quaternions (w, x, y, z), degrees where a name ends in
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -13,6 +14,25 @@ from opend_mj.transforms import mat_to_quat, quat_axis_z, quat_mul
 
 #: The stages an episode goes through (``PlanResult.stage_reached``; "check" ends every episode).
 STAGES = ("locate", "approach", "grasp", "pull", "recover")
+
+
+class StageOutcome(StrEnum):
+    """How a pull (:meth:`~opend_mj.policy.planner.pull.Pulling.pull`) or a handle's whole attempt
+    (:meth:`~opend_mj.policy.planner.loop.Planner.open_handle`) ended. The values are the words the
+    records keep (a pull's ``{"pull_end": ...}`` event), and a member equals its word."""
+
+    #: the part is open (or the pull ended where it could not go on: stalled, at its stop, out of time)
+    DONE = "done"
+    #: the grip was lost during the pull
+    SLIPPED = "slipped"
+    #: no grasp held the handle (or the hand let go of it and it was given up)
+    NOT_HELD = "not_held"
+    #: every grasp closed on air and nothing moved: no handle in the solver's box
+    NO_HANDLE = "no_handle"
+    #: the held handle's motion showed the other kind than the instruction's
+    WRONG_KIND = "wrong_kind"
+    #: a drawer that did not come out along this direction (slid along its front next)
+    STUCK = "stuck"
 
 
 @dataclass

@@ -9,7 +9,9 @@ Modules: :mod:`.spec` (``spec.json``: :class:`HandSpec`, grasp-site <-> root pos
 Four hands ship in ``hands/<name>/`` (``hand.xml``, ``spec.json``, ``grasp.json``, ``planner.json``,
 ``scene.xml``, ``render.png``, ``README.md``, ``CHANGELOG.md``):
 ``franka`` (2 DoF), ``allegro`` (16), ``shadow`` (20), ``skeleton`` (20). ``hands/build_hands.py``
-generates the MJCF and specs from published dimensions (primitive geoms only).
+generates the MJCF and specs from published dimensions (primitive geoms only). The registry finds
+them by their folders (``$OPEND_HANDS_DIR`` names another folder of hands); each ``spec.json`` holds
+the hand's ``title`` and ``order``, so a hand is added by adding its folder.
 
 Conventions (world: z up, metres; cabinets face -x, the hand approaches handles moving along +x):
 
@@ -44,11 +46,13 @@ from opend_mj.sim.hands.entity import (
     touch_parts,
 )
 from opend_mj.sim.hands.registry import (
-    BUILTIN_HANDS,
     HANDS_DIR,
-    HandEntry,
+    HANDS_DIR_ENV,
     HandModel,
+    builtin_hands,
+    find_hands,
     get_hand,
+    hands_folder,
     list_hands,
     load_hand_folder,
     load_spec,
@@ -68,9 +72,9 @@ from opend_mj.sim.hands.spec import (
 )
 
 __all__ = [
-    "BUILTIN_HANDS", "GRASP_FILE", "HANDS_DIR", "PLANNER_FILE", "WELD_SOLIMP", "WELD_SOLREF", "GraspProfile",
-    "Hand", "HandEntry", "HandModel", "HandPlannerConfig", "HandSpec", "HandTouch", "MocapHandle",
-    "attach_with_mocap", "get_hand", "grasp_pose_to_root_pose", "list_hands", "load_hand_folder", "load_spec",
-    "orientation_for_handle", "register_hand", "root_pose_to_grasp_pose", "touch_dict", "touch_geoms",
+    "GRASP_FILE", "HANDS_DIR", "HANDS_DIR_ENV", "PLANNER_FILE", "WELD_SOLIMP", "WELD_SOLREF", "GraspProfile",
+    "Hand", "HandModel", "HandPlannerConfig", "HandSpec", "HandTouch", "MocapHandle",
+    "attach_with_mocap", "builtin_hands", "find_hands", "get_hand", "grasp_pose_to_root_pose", "hands_folder",
+    "list_hands", "load_hand_folder", "load_spec", "orientation_for_handle", "register_hand", "root_pose_to_grasp_pose", "touch_dict", "touch_geoms",
     "touch_parts",
 ]

@@ -1,5 +1,12 @@
-"""The hand registry: one :class:`HandModel` per name (the four built-in ones in ``hands/<name>/``,
-shipped with the package (`opend_mj.resources`), and any a user registers).
+"""The hand registry: one :class:`HandModel` per name: the hands found in the hands folder (every
+``<folder>/<name>/`` with a ``hand.xml`` and a ``spec.json``; :func:`hands_folder`: the shipped
+``hands/`` (`opend_mj.resources.hands_dir`), or the folder ``$OPEND_HANDS_DIR`` names), and any a user
+registers (:func:`register_hand`).
+
+A hand is listed in one place, its own folder: its name is the folder's, its title and its place in
+listings are ``title`` and ``order`` in its ``spec.json``. Everything that lists hands (`opend report`,
+the expert tables, ``hands/build_hands.py``, ``opend hands``) asks :func:`list_hands` and
+:attr:`HandModel.title`; adding a hand is adding its folder.
 """
 
 from __future__ import annotations
@@ -18,9 +25,18 @@ from opend_mj.sim.hands.settings import (
 )
 from opend_mj.sim.hands.spec import HandSpec
 
-#: The built-in hands' folder: the package's copy when installed, the clone's ``hands/`` otherwise.
+#: The shipped hands' folder: the package's copy when installed, the clone's ``hands/`` otherwise.
 HANDS_DIR = resources.hands_dir()
-BUILTIN_HANDS = ("franka", "allegro", "shadow", "skeleton")
+#: The environment variable naming a folder of hands to use instead of :data:`HANDS_DIR` (a folder
+#: laid out like ``hands/``: one subfolder per hand).
+HANDS_DIR_ENV = "OPEND_HANDS_DIR"
+
+
+def hands_folder() -> Path:
+    """The folder the registry finds its hands in: ``$OPEND_HANDS_DIR`` where set, else :data:`HANDS_DIR`."""
+    other = os.environ.get(HANDS_DIR_ENV)
+    return Path(other).expanduser().resolve() if other else HANDS_DIR
+
 
 @dataclass(frozen=True)
 class HandModel:
@@ -41,11 +57,17 @@ class HandModel:
         """Where ``opend search-grasp`` writes this hand's grasp tuning."""
         return self.folder / GRASP_FILE
 
+    @property
+    def title(self) -> str:
+        """The hand's name in tables and pages (``spec.json``'s ``title``, else its name)."""
+        return self.spec.display_title
 
-#: The former name of :class:`HandModel`.
-HandEntry = HandModel
 
+#: Every hand by name, those of the hands folder and those registered.
 _REGISTRY: dict[str, HandModel] = {}
+#: The hands folder :data:`_FOUND` was read from, and what was found there (name -> model, in order).
+_FOUND_IN: Path | None = None
+_FOUND: dict[str, HandModel] = {}
 
 
 def load_hand_folder(folder: str | os.PathLike, name: str | None = None, xml_path: str | os.PathLike | None = None,
@@ -94,14 +116,45 @@ def register_hand(name: str, xml_path: str | os.PathLike, spec: HandSpec | dict 
     return model
 
 
+def _listing_key(model: HandModel) -> tuple:
+    order = model.spec.order
+    return (order is None, order if order is not None else 0, model.name)
+
+
+def find_hands(folder: str | os.PathLike) -> list[HandModel]:
+    """The hands in ``folder``: every subfolder with a ``hand.xml`` and a ``spec.json``, named after
+    the subfolder, ordered by their ``spec.json``'s ``order`` (then by name)."""
+    folder = Path(folder)
+    subfolders = sorted(d for d in folder.iterdir() if (d / "hand.xml").is_file() and (d / "spec.json").is_file()) \
+        if folder.is_dir() else []
+    return sorted((load_hand_folder(d, name=d.name) for d in subfolders), key=_listing_key)
+
+
 def _ensure_builtin() -> None:
-    for n in BUILTIN_HANDS:
-        if n not in _REGISTRY and (HANDS_DIR / n / "hand.xml").is_file():
-            _REGISTRY[n] = load_hand_folder(HANDS_DIR / n, name=n)
+    """Read the hands folder (again where :func:`hands_folder` changed since it was read): its hands
+    replace those of the folder read before; a hand registered under the same name is kept."""
+    global _FOUND_IN
+    folder = hands_folder()
+    if _FOUND_IN != folder:
+        for name, model in _FOUND.items():
+            if _REGISTRY.get(name) is model:
+                del _REGISTRY[name]
+        _FOUND.clear()
+        _FOUND.update((model.name, model) for model in find_hands(folder))
+        _FOUND_IN = folder
+    for name, model in _FOUND.items():  # (also where one was taken out of the registry since)
+        _REGISTRY.setdefault(name, model)
+
+
+def builtin_hands() -> list[str]:
+    """The names of the hands in the hands folder (:func:`hands_folder`), in their order."""
+    _ensure_builtin()
+    return list(_FOUND)
 
 
 def get_hand(name: str) -> HandModel:
-    """The hand registered as ``name`` (the built-in ones load from ``hands/<name>/`` on first use)."""
+    """The hand registered as ``name`` (those of the hands folder load from ``<folder>/<name>/`` on
+    first use)."""
     _ensure_builtin()
     if name not in _REGISTRY:
         raise KeyError(f"unknown hand {name!r}; known: {', '.join(list_hands())}")
@@ -109,8 +162,10 @@ def get_hand(name: str) -> HandModel:
 
 
 def list_hands() -> list[str]:
+    """Every hand's name: those of the hands folder in their order, then the registered ones."""
     _ensure_builtin()
-    return list(_REGISTRY)
+    found = [n for n in _FOUND if n in _REGISTRY]
+    return found + [n for n in _REGISTRY if n not in _FOUND]
 
 
 def load_spec(name: str) -> HandSpec:

@@ -13,10 +13,10 @@ import numpy as np
 from dm_control import mjcf
 
 from opend_mj.sim.hands import (
-    HANDS_DIR,
     Hand,
     MocapHandle,
     attach_with_mocap,
+    get_hand,
     grasp_pose_to_root_pose,
     orientation_for_handle,
 )
@@ -79,7 +79,7 @@ def scene_xml_text(name: str, options: PhysicsOptions = PHYSICS) -> str:
 
 def write_scene_xml(name: str, path: str | os.PathLike | None = None) -> Path:
     """Write ``hands/<name>/scene.xml`` next to the hand's ``hand.xml`` (see `scene_xml_text`)."""
-    path = Path(path) if path else HANDS_DIR / name / "scene.xml"
+    path = Path(path) if path else get_hand(name).folder / "scene.xml"
     path.write_text(scene_xml_text(name))
     return path
 

@@ -49,6 +49,11 @@ class HandSpec:
     mass: float = 0.0
     convention: str = ""
     notes: str = ""
+    #: the hand's name in tables and pages ("Franka gripper"); empty: its ``name``
+    title: str = ""
+    #: where the hand comes in listings (the registry, tables, ``make results``): by ``order``, then
+    #: by name; a hand without one comes after those that have one
+    order: int | None = None
 
     def __post_init__(self) -> None:
         if self.dof != len(self.joint_names) or self.dof != len(self.actuator_names):
@@ -63,6 +68,11 @@ class HandSpec:
                                  f"expected {len(self.actuator_names)}")
         if len(self.open_pose) != len(self.actuator_names):
             raise ValueError(f"hand {self.name!r}: open_pose has wrong length")
+
+    @property
+    def display_title(self) -> str:
+        """``title``, else ``name``."""
+        return self.title or self.name
 
     def grasp_profile(self, orientation: str) -> np.ndarray:
         return np.asarray(self.grasp_profiles[orientation], dtype=float)
