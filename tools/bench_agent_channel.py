@@ -30,6 +30,8 @@ import statistics
 import time
 from pathlib import Path
 
+from bench_sections import write_section  # tools/, beside this script
+
 ROOT = Path(__file__).resolve().parents[1]
 TITLE = "## Agent channel"
 
@@ -173,19 +175,6 @@ def section(cabinets: Path, hand: str, steps: int, chunk: int, bc: bool) -> str:
         "|---|---:|---:|---:|---|", *rows, ""])
 
 
-def write_section(path: Path, text: str) -> None:
-    """Put ``text`` into ``path`` in place of its agent channel section (or at the end)."""
-    old = path.read_text() if path.exists() else "# Benchmarks\n"
-    lines = old.rstrip("\n").split("\n")
-    if TITLE in lines:
-        start = lines.index(TITLE)
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-        lines[start:end] = text.rstrip("\n").split("\n") + ([""] if end < len(lines) else [])
-    else:
-        lines += [""] + text.rstrip("\n").split("\n")
-    path.write_text("\n".join(lines) + "\n")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
@@ -199,7 +188,7 @@ def main() -> None:
     text = section(args.cabinets, args.hand, args.steps, args.chunk, args.bc)
     print(text)
     if args.write is not None:
-        write_section(args.write, text)
+        write_section(args.write, TITLE, text)
 
 
 if __name__ == "__main__":

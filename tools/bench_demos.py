@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_sections import write_section  # tools/, beside this script
+
 import opend_mj  # noqa: F401  (off-screen EGL before mujoco loads)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,19 +97,6 @@ def section(cabinets: Path, episodes: int, steps: int) -> str:
     return "\n".join(text)
 
 
-def write_section(path: Path, text: str) -> None:
-    """Put ``text`` into ``path`` in place of its demonstrations section (or at the end)."""
-    old = path.read_text() if path.exists() else "# Benchmarks\n"
-    lines = old.rstrip("\n").split("\n")
-    if TITLE in lines:
-        start = lines.index(TITLE)
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-        lines[start:end] = text.rstrip("\n").split("\n") + ([""] if end < len(lines) else [])
-    else:
-        lines += [""] + text.rstrip("\n").split("\n")
-    path.write_text("\n".join(lines) + "\n")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cabinets", type=Path, default=ROOT / "cabinets")
@@ -123,7 +112,7 @@ def main() -> None:
     text = text.replace("{load}", f"{before:.2f} / {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(text)
     if args.write is not None:
-        write_section(args.write, text)
+        write_section(args.write, TITLE, text)
 
 
 if __name__ == "__main__":
