@@ -287,8 +287,7 @@ class WarpBatchEnv:
                 rows[k].append(np.array(getattr(copy, k)))
         for k, values in rows.items():
             arr = getattr(self.model, k)
-            arr.assign(wp.array(np.stack(values).astype(np.float32).reshape(arr.shape), dtype=arr.dtype,
-                                device=self.wp_device))
+            arr.assign(wp.array(np.stack(values).astype(np.float32), dtype=arr.dtype, device=self.wp_device))
         return factors
 
     @staticmethod
@@ -312,9 +311,13 @@ class WarpBatchEnv:
         self._mjw.reset_data(self.model, self.data)
         self._reset_worlds(torch.ones(self.num_worlds, dtype=torch.bool, device=self.device))
         self._needs_reset = False
-        obs = self.obs.clone()
+        with self._wp.ScopedDevice(self.wp_device):
+            self._mjw.kinematics(self.model, self.data)
         terms = self._terms()
-        return self._observation(obs), {"success": terms["success"], "open_ratio": terms["open_ratio"]}
+        info = {"success": terms["success"], "open_ratio": terms["open_ratio"]}
+        if self._render is not None:
+            info.update(self._render.images())
+        return self.obs.clone(), info
 
     def _reset_worlds(self, mask) -> None:
         """Write each masked world's next start state (the pool's) into the Warp data and the float64
@@ -394,10 +397,7 @@ class WarpBatchEnv:
                 with self._wp.ScopedDevice(self.wp_device):
                     mjw.kinematics(m, d)
                 info.update(self._render.images(where=done, into={k: info[k] for k in ("rgb", "depth") if k in info}))
-        return self._observation(self.obs), reward, terminated, truncated, info
-
-    def _observation(self, obs):
-        return obs
+        return self.obs, reward, terminated, truncated, info
 
     # ------------------------------------------------------------------ the action (vectorised)
     def _native(self, a):
