@@ -10,7 +10,8 @@ over as many control steps as its share of ``--budget`` seconds allows (at least
 skipped when the smaller one's rate says two of its steps would not fit in what is left. In the same
 run, the CPU environment (`OpenDCore`, one process, the compiled step) is timed on the same episode.
 Prints one line per N: env steps/s (control steps of all worlds together, each 8 physics steps), its
-ratio to the CPU environment's, seconds per batched step; then the device in words.
+ratio to the CPU environment's, seconds per batched step; then the device in words and the load
+average (above the core count, other work shared the machine and the rates understate it).
 """
 
 from __future__ import annotations
@@ -92,7 +93,8 @@ def main(argv=None) -> int:
     cpu = cpu_rate(args.cabinets, args.hand, cabinet, joint, args.cpu_seconds)
     print(f"episode: {cabinet}/{joint}, hand {args.hand}, state observations, dense reward, random delta actions")
     print(f"CPU environment (OpenDCore, 1 process, compiled step): {cpu:,.0f} env steps/s")
-    print(f"{'N':>6} {'env steps/s':>12} {'x CPU env':>9} {'s/step':>8} {'steps':>6} {'build s':>8} {'first s':>8}")
+    print(f"{'N':>6} {'env steps/s':>12} {'x CPU env':>9} {'s/step':>8} {'steps':>6} {'build s':>8} {'first s':>8}",
+          flush=True)
     per_world = None  # seconds per world-step of the last N (to predict the next)
     for n in sorted(args.worlds):
         left = deadline - time.perf_counter()
@@ -128,7 +130,8 @@ def main(argv=None) -> int:
               flush=True)
         env.close()
         del env
-    print(f"device: {device_words(wp, device)}")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"device: {device_words(wp, device)}; load average (1 min) at the end: {load:.2f}")
     return 0
 
 

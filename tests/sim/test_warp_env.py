@@ -110,7 +110,8 @@ def test_batched_worlds_follow_the_cpu_environment(small_dataset, hand):
                 ratio_diff = max(ratio_diff, abs(float(info["open_ratio"][w]) - ref_ratio))
                 if t == len(cpu[w]) - 1:
                     assert bool(info["success"][w]) == ref_success, f"world {w}: verdict differs"
-        print(f"{hand}: free air {early:.1e}, root/grasp site (reach, grasp) {late:.1e}, mocap {mocap:.1e}, mean reward "
+        print(f"{hand}: free air {early:.1e}, root/grasp site (reach, grasp) {late:.1e}, mocap {mocap:.1e}, "
+              f"mean reward "
               f"{reward_sum / count:.1e}, open ratio {ratio_diff:.1e}, CPU readers on the Warp state {cpu_check:.1e}")
         assert cpu_check < 1e-5
         assert early < 1e-3 and late < 0.02 and mocap < 1e-6

@@ -47,12 +47,13 @@ else in the package imports Warp.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from opend_mj.sim.envs import EnvConfig, OpenDCore, make_config
+from opend_mj.sim.warp_parts import (PhysicsRandomization, WarpRenderer, capture_state, mat_to_quat, quat_mul,
+                                      randomize_physics)
 
 #: The extra's packages: a test or tool that needs them says this when they are missing.
 MISSING = "the optional extra .[warp] (mujoco-warp, warp-lang) is not installed"
@@ -66,19 +67,6 @@ def available() -> bool:
     except ImportError:
         return False
     return True
-
-
-@dataclass(frozen=True)
-class PhysicsRandomization:
-    """Per-world factors on the cabinet's physics (the ``physics`` perturbation axis of `sim.perturb`):
-    handle friction, joint friction loss, joint damping, and the moving parts' mass and inertia, each
-    times a factor log-uniform in ``factor`` (the ``strong`` level's range by default), drawn from
-    ``seed``. ``draws``: distinct draws (world w takes draw w % draws; the model's batched arrays
-    hold ``draws`` rows)."""
-
-    factor: tuple[float, float] = (0.5, 2.0)
-    seed: int = 0
-    draws: int | None = None  # None: one per world
 
 
 def _torch():
@@ -133,7 +121,7 @@ class WarpBatchEnv:
         for k in range(pool):
             _, info = core.reset(self.seed + k, self._options)
             data = core.scene._data
-            states.append(_capture(data))
+            states.append(capture_state(data))
             flats.append(core.flat.copy())
             starts.append(core.scene.probe.start_distance)
             infos.append(info)
@@ -155,9 +143,10 @@ class WarpBatchEnv:
             self.model = mjw.put_model(mjm, batch_sizes=batch or None)
             self.data = mjw.put_data(mjm, scene._data, nworld=n, nconmax=nconmax, njmax=njmax)
             if randomize is not None:
-                self.physics_factors = self._randomize(randomize, batch["body_mass"])
+                self.physics_factors = randomize_physics(self, randomize, batch["body_mass"])
             else:
                 self.physics_factors = None
+        wp.synchronize_device(self.wp_device)
         self._mjw, self._wp = mjw, wp
         d = self.data
         t = wp.to_torch
@@ -245,62 +234,18 @@ class WarpBatchEnv:
         # ---------------------------------------------------------- images
         self._render = None
         if config.obs_mode != "state":
-            self._render = _Renderer(self, config.obs_mode, config.image_size, task.camera.full_identifier)
+            self._render = WarpRenderer(self, config.obs_mode, config.image_size, task.camera.full_identifier)
         self._needs_reset = True
         self._mujoco = mujoco
 
     # ------------------------------------------------------------------ physics randomisation
-    def _randomize(self, r: PhysicsRandomization, draws: int) -> np.ndarray:
-        """Per-draw factors (draws, 4: handle friction, friction loss, damping, mass) written into
-        the batched Model arrays; the constants `mj_setConst` derives from mass (subtree masses,
-        inverse weights) recomputed on the CPU per draw."""
-        mujoco = self._import_mujoco()
-        scene, wp = self.scene, self._wpmod()
-        task, physics = scene.task, scene.physics
-        cab = task.cabinet
-        dofs = np.array([int(physics.bind(cab.joint_element(j)).dofadr) for j in cab._joints])
-        geoms = np.array([physics.model.name2id(f"cabinet/{g}", "geom")
-                          for t in cab.targets for g in t.handle_geoms], int)
-        bodies = np.array([physics.model.name2id(b.full_identifier, "body") for b in cab.moving_bodies()], int)
-        rng = np.random.default_rng([int(r.seed), 71])
-        lo, hi = (math.log(x) for x in r.factor)
-        factors = np.exp(rng.uniform(lo, hi, (draws, 4)))
-        base = self.mj_model
-        copy = _copy_model(base)
-        data = mujoco.MjData(copy)
-        rows = {k: [] for k in ("dof_damping", "dof_frictionloss", "geom_friction", "body_mass", "body_inertia",
-                                "body_subtreemass", "body_invweight0", "dof_invweight0")}
-        for f_friction, f_loss, f_damp, f_mass in factors:
-            copy.dof_damping[:] = base.dof_damping
-            copy.dof_frictionloss[:] = base.dof_frictionloss
-            copy.geom_friction[:] = base.geom_friction
-            copy.body_mass[:] = base.body_mass
-            copy.body_inertia[:] = base.body_inertia
-            copy.dof_damping[dofs] *= f_damp
-            copy.dof_frictionloss[dofs] *= f_loss
-            if len(geoms):
-                copy.geom_friction[geoms, 0] *= f_friction
-            copy.body_mass[bodies] *= f_mass
-            copy.body_inertia[bodies] *= f_mass
-            mujoco.mj_setConst(copy, data)
-            for k in rows:
-                rows[k].append(np.array(getattr(copy, k)))
-        for k, values in rows.items():
-            arr = getattr(self.model, k)
-            arr.assign(wp.array(np.stack(values).astype(np.float32), dtype=arr.dtype, device=self.wp_device))
-        return factors
-
-    @staticmethod
-    def _import_mujoco():
-        import mujoco
-
-        return mujoco
-
-    @staticmethod
-    def _wpmod():
-        import warp
-
-        return warp
+    def _scope(self):
+        """Warp's launches on this env's device; on a GPU, on torch's current stream, so that the
+        torch operations on the same memory (actions, resets, observations) are ordered with them."""
+        wp = self._wp
+        if self.wp_device.is_cuda:
+            return wp.ScopedStream(wp.stream_from_torch(_torch().cuda.current_stream(self.device)))
+        return wp.ScopedDevice(self.wp_device)
 
     # ------------------------------------------------------------------ reset
     def reset(self):
@@ -311,7 +256,7 @@ class WarpBatchEnv:
         self._mjw.reset_data(self.model, self.data)
         self._reset_worlds(torch.ones(self.num_worlds, dtype=torch.bool, device=self.device))
         self._needs_reset = False
-        with self._wp.ScopedDevice(self.wp_device):
+        with self._scope():
             self._mjw.kinematics(self.model, self.data)
         terms = self._terms()
         info = {"success": terms["success"], "open_ratio": terms["open_ratio"]}
@@ -367,7 +312,7 @@ class WarpBatchEnv:
         rows_pos, rows_quat = self._apply(pos, quat, fingers)
         mjw, m, d = self._mjw, self.model, self.data
         mp, mq, mid = self._mocap_pos, self._mocap_quat, self._mocap
-        with self._wp.ScopedDevice(self.wp_device):
+        with self._scope():
             for i in range(self._substeps):
                 mp[:, mid] = rows_pos[:, i].float()
                 mq[:, mid] = rows_quat[:, i].float()
@@ -394,7 +339,7 @@ class WarpBatchEnv:
             info["final_obs"] = self.obs.clone()
             self._reset_worlds(done)
             if self._render is not None:  # the new episodes' first images
-                with self._wp.ScopedDevice(self.wp_device):
+                with self._scope():
                     mjw.kinematics(m, d)
                 info.update(self._render.images(where=done, into={k: info[k] for k in ("rgb", "depth") if k in info}))
         return self.obs, reward, terminated, truncated, info
@@ -416,7 +361,7 @@ class WarpBatchEnv:
         axis = axis / torch.sqrt((axis * axis).sum(1))[:, None].clamp_min(1e-300)
         half = angle / 2
         q1 = torch.cat([torch.cos(half)[:, None], torch.sin(half)[:, None] * axis], 1)
-        quat = _quat_mul(q1, self._mocap_quat64)
+        quat = quat_mul(q1, self._mocap_quat64)
         quat = quat / torch.sqrt((quat * quat).sum(1))[:, None]
         quat = torch.where((angle > 1e-12)[:, None], quat, self._mocap_quat64)
         fingers = self._finger_low + (c[:, 6:] + 1.0) * self._half_span
@@ -538,7 +483,7 @@ class WarpBatchEnv:
         o[:, s["root_quat"]] = self._xquat[:, self._root].to(f64)
         o[:, s["root_vel"]] = self._qvel[:, self._free:self._free + 6].to(f64)
         o[:, s["grasp_site_pos"]] = self._site_xpos[:, self._site].to(f64)
-        o[:, s["grasp_site_quat"]] = _mat_to_quat(self._site_xmat[:, self._site].to(f64))
+        o[:, s["grasp_site_quat"]] = mat_to_quat(self._site_xmat[:, self._site].to(f64))
         o[:, s["mocap_pos"]] = self._mocap_pos64
         o[:, s["mocap_quat"]] = self._mocap_quat64
         o[:, s["touch"]] = terms["touch"]
@@ -567,8 +512,8 @@ class WarpBatchEnv:
         reach = torch.clamp((start - dist - c.reach_dead_zone) / torch.where(span > 1e-9, span, torch.ones_like(span)),
                             0.0, 1.0)
         reach = torch.where(span > 1e-9, reach, (dist <= c.reach_dead_zone).to(torch.float64))
-        open_term = torch.clamp((terms["open_ratio"] - c.open_dead_zone) / max(self._threshold - c.open_dead_zone, 1e-9),
-                                0.0, 1.0)
+        open_span = max(self._threshold - c.open_dead_zone, 1e-9)
+        open_term = torch.clamp((terms["open_ratio"] - c.open_dead_zone) / open_span, 0.0, 1.0)
         others = torch.clamp(terms["others_range"] / c.others_full, 0.0, 1.0)
         terms.update(reach=reach, open=open_term, others=others)
         total = c.reach_weight + c.contact_weight + c.open_weight
@@ -600,95 +545,6 @@ class WarpBatchEnv:
     def close(self) -> None:
         self.core.close()
         self._render = None
-
-
-def _capture(data) -> dict:
-    """The state `WarpBatchEnv` resets a world to (copies of MjData's rows)."""
-    return {"qpos": data.qpos.copy(), "qvel": data.qvel.copy(), "act": data.act.copy(), "ctrl": data.ctrl.copy(),
-            "mocap_pos": data.mocap_pos.ravel().copy(), "mocap_quat": data.mocap_quat.ravel().copy(),
-            "qacc_warmstart": data.qacc_warmstart.copy(), "time": np.array(float(data.time))}
-
-
-def _copy_model(model):
-    import copy
-
-    return copy.copy(model)
-
-
-def _quat_mul(a, b):
-    """Hamilton product of (N, 4) quaternions (w, x, y, z), as `transforms.quat_mul`."""
-    torch = _torch()
-    w1, x1, y1, z1 = a.unbind(1)
-    w2, x2, y2, z2 = b.unbind(1)
-    return torch.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], 1)
-
-
-def _mat_to_quat(mat):
-    """`transforms.mat9_to_quat` of (N, 3, 3) rotation matrices: (N, 4), w >= 0, unit."""
-    torch = _torch()
-    m00, m01, m02 = mat[:, 0, 0], mat[:, 0, 1], mat[:, 0, 2]
-    m10, m11, m12 = mat[:, 1, 0], mat[:, 1, 1], mat[:, 1, 2]
-    m20, m21, m22 = mat[:, 2, 0], mat[:, 2, 1], mat[:, 2, 2]
-    t = m00 + m11 + m22
-
-    def branch(s_arg, build):
-        s = torch.sqrt(torch.clamp(s_arg, min=1e-30)) * 2
-        return torch.stack(build(s), 1)
-
-    q0 = branch(t + 1.0, lambda s: [0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s])
-    q1 = branch(1.0 + m00 - m11 - m22, lambda s: [(m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s])
-    q2 = branch(1.0 + m11 - m00 - m22, lambda s: [(m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s])
-    q3 = branch(1.0 + m22 - m00 - m11, lambda s: [(m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s])
-    c0 = (t > 0)[:, None]
-    c1 = ((m00 > m11) & (m00 > m22))[:, None]
-    c2 = (m11 > m22)[:, None]
-    q = torch.where(c0, q0, torch.where(c1, q1, torch.where(c2, q2, q3)))
-    q = q / torch.sqrt((q * q).sum(1, keepdim=True))
-    return torch.where(q[:, :1] < 0, -q, q)
-
-
-class _Renderer:
-    """Batched images of the front camera from Warp's ray-traced renderer (`mujoco_warp.render`)."""
-
-    def __init__(self, env: WarpBatchEnv, mode: str, size: int, camera: str):
-        import mujoco
-
-        mjw, wp = env._mjw, env._wp
-        self.env = env
-        self.rgb = mode in ("rgb", "rgbd")
-        self.depth = mode in ("depth", "rgbd")
-        cam = mujoco.mj_name2id(env.mj_model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
-        if cam < 0:
-            raise ValueError(f"no camera {camera!r} in the scene")
-        self.size = int(size)
-        with wp.ScopedDevice(env.wp_device):
-            self.rc = mjw.create_render_context(env.mj_model, nworld=env.num_worlds, cam_res=(self.size, self.size),
-                                                render_rgb=self.rgb, render_depth=self.depth, cam_active=[cam])
-        self._rgb = wp.to_torch(self.rc.rgb_data) if self.rgb else None
-        self._depth = wp.to_torch(self.rc.depth_data) if self.depth else None
-
-    def images(self, where=None, into: dict | None = None) -> dict:
-        """{"rgb": (N, S, S, 3) uint8, "depth": (N, S, S) float32 metres (planar; 0: nothing hit)} of the
-        current state; ``where``: only those worlds' rows of ``into`` are replaced."""
-        torch = _torch()
-        env, mjw, wp = self.env, self.env._mjw, self.env._wp
-        with wp.ScopedDevice(env.wp_device):
-            mjw.refit_bvh(env.model, env.data, self.rc)
-            mjw.render(env.model, env.data, self.rc)
-        n, s = env.num_worlds, self.size
-        out = {}
-        if self.rgb:
-            packed = self._rgb[:, : s * s].view(torch.int32)
-            rgb = torch.stack([(packed >> 16) & 0xFF, (packed >> 8) & 0xFF, packed & 0xFF], -1)
-            out["rgb"] = rgb.to(torch.uint8).view(n, s, s, 3)
-        if self.depth:
-            out["depth"] = self._depth[:, : s * s].view(n, s, s).clone()
-        if where is not None and into:
-            for k, v in out.items():
-                if k in into:
-                    out[k] = torch.where(where.view(-1, *([1] * (v.dim() - 1))), v, into[k])
-        return out
 
 
 class CabinetCycle:
