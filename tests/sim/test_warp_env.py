@@ -174,6 +174,8 @@ def test_worlds_reset_themselves_when_their_episode_ends(small_dataset):
             assert np.array_equal(obs[w].numpy(), core.flat)
         obs, reward, terminated, truncated, info = env.step(zero)
         assert not bool((terminated | truncated).any()) and torch.isfinite(obs).all()
+        with pytest.raises(ValueError, match="non-finite"):  # as the CPU environment
+            env.step(torch.full((N, env.action_dim), float("nan"), dtype=torch.float64))
     finally:
         env.close()
         core.close()

@@ -233,6 +233,9 @@ class WarpBatchEnv:
         self._dense = config.dense
         # ---------------------------------------------------------- images
         self._render = None
+        #: the front camera's intrinsics (3, 3) and pose (4, 4), fixed per batch (`SceneReader.camera_arrays`)
+        cam = scene.camera_arrays()
+        self.camera_K, self.camera_pose = cam["camera_K"], cam["camera_pose"]
         if config.obs_mode != "state":
             self._render = WarpRenderer(self, config.obs_mode, config.image_size, task.camera.full_identifier)
         self._needs_reset = True
@@ -253,7 +256,8 @@ class WarpBatchEnv:
         observations (N, obs_size) and the info dict of `step`."""
         torch = _torch()
         self.episodes.zero_()
-        self._mjw.reset_data(self.model, self.data)
+        with self._scope():
+            self._mjw.reset_data(self.model, self.data)
         self._reset_worlds(torch.ones(self.num_worlds, dtype=torch.bool, device=self.device))
         self._needs_reset = False
         with self._scope():
@@ -308,6 +312,8 @@ class WarpBatchEnv:
         a = torch.as_tensor(action, device=self.device).to(torch.float64)
         if a.shape != (self.num_worlds, self.action_dim):
             raise ValueError(f"action has shape {tuple(a.shape)}, expected ({self.num_worlds}, {self.action_dim})")
+        if not bool(torch.isfinite(a).all()):  # as the CPU environment, which raises on a non-finite action
+            raise ValueError("actions have non-finite values")
         pos, quat, fingers = self._native(a)
         rows_pos, rows_quat = self._apply(pos, quat, fingers)
         mjw, m, d = self._mjw, self.model, self.data
