@@ -7,7 +7,7 @@ WORKERS  ?= $(shell nproc)
 export MUJOCO_GL ?= egl
 export PYTHONUNBUFFERED := 1
 
-.PHONY: quickstart evaluate results eval-real robustness robustness-hands robustness-depth robustness-real expert-check train-bc install install-mjx install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos bench-agents clean
+.PHONY: quickstart evaluate results eval-real robustness robustness-hands robustness-depth robustness-real expert-check train-bc install install-mjx install-warp test-warp bench-warp install-lerobot system-deps assets test fuzz bench bench-quick bench-assets bench-assets-real bench-hands bench-task bench-env bench-demos bench-agents clean
 
 ## Set up from nothing, build the default (procedural) dataset and run the main job: the planner with
 ## the oracle handle solver on the test split (Allegro hand), scored into the paper's tables.
@@ -157,6 +157,22 @@ $(VENV)/.installed: pyproject.toml
 ## installed, so `install` and CI leave it out; see docs/batched-simulation.md).
 install-mjx: install
 	$(BIN)/pip install -q -e '.[mjx]'
+
+## The optional extra for batched environments on MuJoCo Warp (opend_mj.sim.warp_env, docs/batched-simulation.md):
+## mujoco-warp and warp-lang, ~600 MB; runs on the CPU, and on an NVIDIA GPU where Warp finds one.
+install-warp: install
+	$(BIN)/pip install -q -e '.[warp]'
+
+## The Warp tests (CPU device; they skip without the extra): batched steps against the CPU environment.
+## The first run compiles Warp's kernels (about a minute on 2 cores; cached under ~/.cache/warp).
+test-warp: install-warp
+	$(BIN)/python -m pytest -q tests/sim/test_warp_env.py
+
+## Environment steps per second of the batched Warp environment at N = 1, 16, 256, 4096 (as far as
+## BENCH_WARP_SECONDS allows) on the device Warp finds, beside the CPU environment's in the same run.
+BENCH_WARP_SECONDS ?= 600
+bench-warp: install-warp
+	$(BIN)/python tools/bench_warp.py --cabinets $(CABINETS) --budget $(BENCH_WARP_SECONDS)
 
 ## LeRobot's library in an environment of its own (it pins torch < 2.11, this project 2.14), for
 ## tools/demos_to_lerobot.py: about 8 GB with torch's CUDA wheels.
