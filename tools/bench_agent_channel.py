@@ -112,8 +112,8 @@ def section(cabinets: Path, hand: str, steps: int, chunk: int, bc: bool) -> str:
     contestants = {"physics": lambda: env.step(hold), "channel": lambda: channel.act(obs)}
     agents = []
     if bc:
-        local = load_agent("opend_mj.policy.bc:BCAgent", ())
-        remote = AgentProcess("opend_mj.policy.bc:BCAgent", (), None)
+        local = load_agent("opend_mj.policy.bc_agent:BCAgent", ())
+        remote = AgentProcess("opend_mj.policy.bc_agent:BCAgent", (), None)
         for agent in (local, remote):
             agent.reset(info)
             agent.act(first)  # the handle solver runs on the first observation

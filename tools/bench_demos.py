@@ -57,7 +57,7 @@ def train(demos: Path, out: Path, steps: int) -> tuple[dict, float, float]:
 
 def section(cabinets: Path, episodes: int, steps: int) -> str:
     from opend_mj.apps.demos import FORMAT_VERSION
-    from opend_mj.policy.learned.bc import BCConfig
+    from opend_mj.policy.learned.bc_model import BCConfig
 
     rows, size = [], None
     with tempfile.TemporaryDirectory() as tmp:

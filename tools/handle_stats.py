@@ -25,7 +25,7 @@ def measure_dataset(cabinets_dir: Path, limit: int | None = None, split: str = "
     from opend_mj.assets.layout import load_manifest
     from opend_mj.policy.perception import estimate_handle, measure_handle
     from opend_mj.policy.perception import PerceptionConfig
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
     from opend_mj.sim.cabinet import load_cabinet_info
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.sim.task import EpisodeSpec, TaskConfig, make_environment

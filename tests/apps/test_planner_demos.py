@@ -26,7 +26,7 @@ def demos_file(small_dataset, tmp_path_factory):
 def test_demos_read_back_with_the_documented_keys(demos_file):
     from opend_mj.apps.demos import read_demos
     from opend_mj.apps.planner_demos import DEMO_OBS_KEYS
-    from opend_mj.policy.learned.bc import PERCEPT_DIM
+    from opend_mj.policy.learned.bc_model import PERCEPT_DIM
     from opend_mj.sim.hands import load_spec
 
     out, _ = demos_file
@@ -183,7 +183,7 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     import torch
 
     from opend_mj.evaluation.results import load_results
-    from opend_mj.policy.learned.bc import load_policies
+    from opend_mj.policy.learned.bc_model import load_policies
 
     out, _ = demos_file
     ckpts = {}
@@ -228,8 +228,8 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     from types import SimpleNamespace
 
     from opend_mj.apps.demos import read_demos
-    from opend_mj.policy.bc import BCAgent
-    from opend_mj.policy.learned.bc import STEP_KEYS, context_features, decode_action, step_features
+    from opend_mj.policy.bc_agent import BCAgent
+    from opend_mj.policy.learned.bc_model import STEP_KEYS, context_features, decode_action, step_features
 
     demo = read_demos(out)[1][0]
     feats, instruction = np.asarray(demo.obs["handle_features"][0], float), demo.attrs["instruction"]
@@ -446,7 +446,7 @@ def test_grasp_style_token_trains_and_acts(demos_file, small_dataset, tmp_path):
     import torch
 
     from opend_mj.apps.demos import read_demos
-    from opend_mj.policy.learned.bc import GRASP_STYLES, load_policy
+    from opend_mj.policy.learned.bc_model import GRASP_STYLES, load_policy
 
     out, _ = demos_file
     _, demos = read_demos(out)

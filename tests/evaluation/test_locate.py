@@ -108,7 +108,7 @@ def test_the_box_is_graded_as_the_planner_acts_on_it(monkeypatch):
 
     import opend_mj.evaluation.locate as locate
     import opend_mj.policy.factory as factory
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
 
     depth = np.full((64, 128), 1.0, np.float32)
     depth[30:34, 42:61] = 0.965  # the left pull, 3.5 cm proud, the nearer to the box's centre (u = 63)

@@ -1,10 +1,10 @@
-"""The behaviour-cloning policy's inputs and outputs (`policy.learned.bc`)."""
+"""The behaviour-cloning policy's inputs and outputs (`policy.learned.bc_model`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import (
+from opend_mj.policy.learned.bc_model import (
     BCConfig,
     decode_action,
     encode_actions,
@@ -58,7 +58,7 @@ def test_percept_gives_a_doors_hinge_line_relative_to_the_handle():
     """The last three percept numbers: the hinge line (x, y) relative to the handle centre and a
     flag; zeros for a handle with none (a drawer), the first 22 numbers unchanged by it (what the
     checkpoints of before the hinge line read)."""
-    from opend_mj.policy.learned.bc import PERCEPT_DIM, HandlePercept, percept_vector
+    from opend_mj.policy.learned.bc_model import PERCEPT_DIM, HandlePercept, percept_vector
     from opend_mj.policy.perception.handle import HandleEstimate, HandleShape
 
     handle = HandleEstimate(centre=np.array([-0.3, 0.1, 0.8]), orientation="vertical", kind="bar",
@@ -81,7 +81,7 @@ def test_the_agents_step_by_step_actions_are_the_models_own():
     those it was traced on; a batch of two goes through the module."""
     import torch
 
-    from opend_mj.policy.learned.bc import build_model, step_actions
+    from opend_mj.policy.learned.bc_model import build_model, step_actions
 
     for modes in (0, 3):
         model = build_model(30, 12, 9, BCConfig(modes=modes)).eval()

@@ -88,7 +88,7 @@ def _library_loaders():
     """name -> a call of one reader on a file: every place a checkpoint enters the project."""
     from opend_mj.policy.learned import checkpoint_tensors
     from opend_mj.policy.learned.affordance import load_affordance
-    from opend_mj.policy.learned.bc import bundle_policies, load_policies, load_policy
+    from opend_mj.policy.learned.bc_model import bundle_policies, load_policies, load_policy
     from opend_mj.policy.learned.bc_train import _warm_start
     from opend_mj.policy.learned.detector import load_detector
     from opend_mj.policy.learned.loop import TrainingLoop, load_pretrained

@@ -37,7 +37,7 @@ def _render(view, boxes):
 
 
 def _box_of(view, lo, hi):
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
 
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     uv = view.project(corners)
@@ -136,7 +136,7 @@ def test_parallel_gripper_pinches_every_bar():
 
 
 def test_a_box_over_a_pair_of_pulls_becomes_the_nearer_pull():
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
     from opend_mj.policy.perception import one_of_paired_handles
 
     depth = np.full((64, 128), 1.0)

@@ -603,7 +603,7 @@ def test_a_box_the_hand_found_empty_is_no_candidate():
     """Three drawer bars; "bottom drawer" names the lowest. Once the hand closed on nothing there
     (``NO_HANDLE``; noise made a ridge of a panel), the next lowest is the bottom drawer, and with
     every candidate found empty there is no answer at all, not the empty box again."""
-    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.handle_box import NO_HANDLE
     from opend_mj.policy.learned.detector import MatchConfig, select_handle
 
     boxes = [_box(128, 40), _box(128, 80), _box(128, 170)]
@@ -619,7 +619,7 @@ def test_a_box_the_hand_found_empty_is_no_candidate():
 def test_the_map_gives_up_a_box_found_empty(front_view, cabinet_depth):
     """CLIPort's map favours the top-left bar for "door"; once the hand found nothing there, the
     other bar is the door."""
-    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.handle_box import NO_HANDLE
     from opend_mj.policy.learned.affordance import choose_proposal
     from opend_mj.policy.perception import handle_proposals
 

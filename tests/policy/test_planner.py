@@ -82,7 +82,7 @@ def test_oracle_opens(planner_cabinets, hand, which):
 
 def test_estimate_handle_from_box_and_depth():
     """A synthetic depth image: a bar 4 cm in front of a wall is located within a few millimetres."""
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
     from opend_mj.policy.perception import PerceptionConfig, estimate_handle
 
     view = _forward_view()
@@ -102,7 +102,7 @@ def test_a_box_holding_only_the_bar_reads_the_panel_around_it():
     """A box snapped to the handle in depth holds only the bar's pixels, all standing out of the
     panel: the panel is read from the depth just around the box (the hinge of a door is placed on
     it), not from the box's far depths (the bar's). A box that shows the panel keeps its own."""
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
     from opend_mj.policy.perception import PerceptionConfig, estimate_handle
 
     view = _forward_view()
@@ -235,7 +235,7 @@ def test_hinge_side_from_instruction():
 def test_refine_box_snaps_to_the_handle_in_depth():
     """A box that misses a handle by a few pixels is moved onto the part that stands out of the panel."""
     from opend_mj.policy.perception import refine_box_with_depth
-    from opend_mj.policy.handle import HandleBox
+    from opend_mj.policy.handle_box import HandleBox
 
     view = _forward_view()
     depth = np.full((256, 256), 1.0)
@@ -434,7 +434,7 @@ class _WrongKindFirst:
     calls: list = []
 
     def solve(self, rgb, depth, instruction, camera_view, observed=()):
-        from opend_mj.policy.handle import HandleBox
+        from opend_mj.policy.handle_box import HandleBox
 
         type(self).calls.append(tuple(observed))
         box = self.boxes["first"] if not observed else self.boxes["named"]
@@ -453,7 +453,7 @@ class _EmptyBoxFirst:
     calls: list = []
 
     def solve(self, rgb, depth, instruction, camera_view, observed=()):
-        from opend_mj.policy.handle import HandleBox
+        from opend_mj.policy.handle_box import HandleBox
 
         type(self).calls.append(tuple(observed))
         return HandleBox(*(self.boxes["empty"] if not observed else self.boxes["named"]))
@@ -467,7 +467,7 @@ def test_a_box_where_the_fingers_close_on_nothing_is_given_up_for_another(planne
     import dataclasses
 
     from opend_mj.evaluation.runner import run_episode
-    from opend_mj.policy.handle import NO_HANDLE
+    from opend_mj.policy.handle_box import NO_HANDLE
     from opend_mj.policy.solvers import register_solver
 
     job = _job(planner_cabinets, DRAWER, "franka")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opend_mj.policy.handle import HandleBox
+from opend_mj.policy.handle_box import HandleBox
 from opend_mj.policy.solvers import locate
 
 

@@ -12,7 +12,7 @@ import pytest
 
 import gymnasium as gym
 import opend_mj.sim.gym_env  # noqa: F401  (registers the ids)
-from opend_mj.policy.handle import HandleBox
+from opend_mj.policy.handle_box import HandleBox
 from opend_mj.policy.perception.watch import WATCH_DIM, WATCH_NAMES
 from opend_mj.policy.watch_env import WATCH_KEY, FrontWatchWrapper
 

@@ -109,7 +109,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     from opend_mj.evaluation.takeover import agent_info
     from opend_mj.policy.expert import PlannerExpert
     from opend_mj.policy.agents import agent_image_every, wants_image
-    from opend_mj.policy.learned.bc import WATCH_KEY, style_index
+    from opend_mj.policy.learned.bc_model import WATCH_KEY, style_index
     from opend_mj.policy.planner import Observation
     from opend_mj.sim.camera import RGBDCamera
     from opend_mj.language import instruction_onehot

@@ -5,7 +5,7 @@ planner with a handle solver. Every 60 Hz control step stores what an agent woul
 before it (`opend_mj.policy.agents`: the hand's own state and touch, the instruction) and the action
 the planner sent, in both agent action spaces: ``actions`` (the task's absolute action, which
 `opend replay` steps) and ``actions_delta`` (the gymnasium environments' normalised delta action,
-clipped to [-1, 1]). The solver's box and the handle it gives in the first image (`policy.learned.bc`:
+clipped to [-1, 1]). The solver's box and the handle it gives in the first image (`policy.learned.bc_model`:
 the planner's own back-projection) are stored with every step, and optionally an RGB-D image per step.
 
 With :class:`ActionNoise` on (DART, Laskey et al. 2017, "DART: Noise injection for robust imitation
@@ -195,7 +195,7 @@ def record_episode(job: EpisodeJob, env=None, config: RecordConfig = RecordConfi
     job's `scene_key` to reuse (as `opend run` reuses them), else one is made."""
     from opend_mj.evaluation.runner import PhysicsDiverged, instruction_for, make_episode_env
     from opend_mj.policy.factory import build_planner
-    from opend_mj.policy.learned.bc import PERCEPT_DIM, perceive_handle, style_index
+    from opend_mj.policy.learned.bc_model import PERCEPT_DIM, perceive_handle, style_index
     from opend_mj.policy.perception import WATCH_DIM, FrontWatcher
     from opend_mj.policy.planner import Observation, Robot
     from opend_mj.sim.camera import RGBDCamera
@@ -400,7 +400,7 @@ def record_demos(jobs: list[EpisodeJob], out: Path, workers: int = 1, config: Re
     return counts
 
 
-#: The observation keys behaviour cloning reads (`policy.learned.bc`), and the watched front
+#: The observation keys behaviour cloning reads (`policy.learned.bc_model`), and the watched front
 #: (`perception.watch`), read where a file has it (a policy that watches needs it: `bc_train`).
 TRAINING_KEYS = ("grasp_site_pos", "grasp_site_quat", "mocap_pos", "mocap_quat", "root_vel", "hand_qpos", "touch",
                  "time", "handle_features")

@@ -130,13 +130,13 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
     import dataclasses
 
     from opend_mj.apps.planner_demos import load_training_demos
-    from opend_mj.policy.learned.bc import BCConfig
+    from opend_mj.policy.learned.bc_model import BCConfig
     from opend_mj.policy.learned.bc_train import train_bc
 
     changes = {k: v for k, v in dict(steps=steps, batch_size=batch_size, lr=lr, chunk=chunk, d_model=d_model,
                                      watch=watch).items() if v is not None}
     if grasp_token:
-        from opend_mj.policy.learned.bc import GRASP_STYLES
+        from opend_mj.policy.learned.bc_model import GRASP_STYLES
 
         changes["modes"] = len(GRASP_STYLES)
     config = dataclasses.replace(BCConfig(seed=seed), **changes)
@@ -198,7 +198,7 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
                    "(drawer or door; repeatable) [all members].")
 def bundle_policy(checkpoints, out, ensemble_decay, routes):
     """Bundle behaviour-cloning checkpoints (e.g. trained with different --seed) into one seed ensemble."""
-    from opend_mj.policy.learned.bc import bundle_policies
+    from opend_mj.policy.learned.bc_model import bundle_policies
 
     try:
         routed = {}

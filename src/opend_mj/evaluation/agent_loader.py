@@ -16,7 +16,7 @@ from pathlib import Path
 from opend_mj.policy.agents import agent_control, agent_images
 
 #: Agents shipped with the package, by short name (``opend run --policy bc``).
-BUILTIN_POLICIES = {"bc": "opend_mj.policy.bc:BCAgent"}
+BUILTIN_POLICIES = {"bc": "opend_mj.policy.bc_agent:BCAgent"}
 
 _LOADED: dict[tuple, object] = {}
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from opend_mj.policy.handle import HandleSolver
+from opend_mj.policy.handle_box import HandleSolver
 from opend_mj.policy.planner import Planner, PlannerConfig
 from opend_mj.policy.solvers import needs_ground_truth, solver_factory
 from opend_mj.sim.hands import HandModel, get_hand

@@ -1,6 +1,6 @@
 """Handle solvers: find the instructed handle's box in the front camera image.
 
-One small interface, :class:`~opend_mj.policy.handle.HandleSolver`::
+One small interface, :class:`~opend_mj.policy.handle_box.HandleSolver`::
 
     solver.solve(rgb, depth, instruction, camera_view) -> HandleBox | None
 
@@ -31,7 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from opend_mj.policy.handle import HandleBox, HandleSolver
+from opend_mj.policy.handle_box import HandleBox, HandleSolver
 
 
 class OracleSolver:
@@ -143,7 +143,7 @@ class Located:
     point: np.ndarray
     #: world x (m) of the handle's front, the face nearest the camera (the cabinet faces -x)
     front_x: float
-    #: the rest of the planner's view of it (`policy.learned.bc.HandlePercept`: the 3D estimate with
+    #: the rest of the planner's view of it (`policy.learned.bc_model.HandlePercept`: the 3D estimate with
     #: orientation, bar or knob, extent and panel; the measured shape; a door's hinge side)
     percept: Any
 
@@ -160,9 +160,9 @@ def locate(obs: dict, instruction: str | None = None, solver: str | Any = "faste
     ground truth (``fasterrcnn``, ``fasterrcnn-sensor``, ``cliport``; made once per process with
     ``options``, e.g. ``checkpoint=``) or an object with ``solve(rgb, depth, instruction,
     camera_view)``. The box is refined and back-projected as the planner and the behaviour-cloning
-    agent do (`policy.learned.bc.perceive_handle`).
+    agent do (`policy.learned.bc_model.perceive_handle`).
     """
-    from opend_mj.policy.learned.bc import perceive_handle
+    from opend_mj.policy.learned.bc_model import perceive_handle
     from opend_mj.sim.camera import CameraView
 
     if isinstance(solver, str):

@@ -14,7 +14,7 @@ acts (`policy.perception.watch`, names and units in `WATCH_NAMES` / `FrontWatche
 
 At reset the handle solver (a registered name, made once through `policy.factory.agent_solver`, which
 refuses a solver that reads the simulator; or an object with ``solve(rgb, depth, instruction, view)``)
-finds the instructed handle in the first RGB-D image (`policy.learned.bc.perceive_handle`) and a
+finds the instructed handle in the first RGB-D image (`policy.learned.bc_model.perceive_handle`) and a
 `FrontWatcher` keeps that image. At control step ``k`` (the observation after ``k`` actions) where
 ``WatchConfig.looks_at(k)`` (every ``every`` steps) the watcher reads a new depth image; every step
 it gives its vector with the grasp site of that step.
@@ -145,7 +145,7 @@ class FrontWatchWrapper(gym.Wrapper):
 
     # ------------------------------------------------------------------ gymnasium
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        from opend_mj.policy.learned.bc import perceive_handle
+        from opend_mj.policy.learned.bc_model import perceive_handle
 
         obs, info = self.env.reset(seed=seed, options=options)
         self._step = 0

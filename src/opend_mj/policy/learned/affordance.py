@@ -346,7 +346,7 @@ class CLIPortSolver:
         """The named handle's box; ``observed``: ((u0, v0, u1, v1), "drawer" | "door") pairs of
         handles the robot moved and saw the kind of (a retry after a wrong handle)."""
         from opend_mj.language import canonical_instruction
-        from opend_mj.policy.handle import HandleBox
+        from opend_mj.policy.handle_box import HandleBox
 
         if self.canonical:
             instruction = canonical_instruction(instruction)

@@ -1,4 +1,4 @@
-"""Training the behaviour-cloning policy (`policy.learned.bc`) from planner demonstrations.
+"""Training the behaviour-cloning policy (`policy.learned.bc_model`) from planner demonstrations.
 
 A demonstration is any object with ``actions`` (T, 7 + n: the task's absolute action), ``obs`` (the
 keys of `bc.STEP_KEYS` plus ``handle_features``, each (T, ...)) and ``attrs``
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opend_mj.policy.learned.bc import (
+from opend_mj.policy.learned.bc_model import (
     WATCH_KEY,
     BCConfig,
     build_model,

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opend_mj.policy.handle import HandleBox
+from opend_mj.policy.handle_box import HandleBox
 from opend_mj.policy.perception.config import PerceptionConfig
 from opend_mj.policy.perception.noise import pixel_noise
 

@@ -85,7 +85,7 @@ NOISE_WINDOWS = ((9, 1), (1, 9), (3, 3))
 def handle_proposals(depth: np.ndarray, view, config: ProposalConfig = ProposalConfig()) -> list[tuple]:
     """Boxes (u0, v0, u1, v1) and pixel masks of the groups in ``depth`` that look like handles:
     a list of (box, mask), mask a bool array over the box's pixels (rows v0:v1, columns u0:u1)."""
-    from opend_mj.policy.handle import centres_overlap
+    from opend_mj.policy.handle_box import centres_overlap
 
     h, w = depth.shape
     vv, uu = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
@@ -216,7 +216,7 @@ def thin_proposals(depth: np.ndarray, view, main: list, config: ThinProposalConf
     """The groups (box, mask) standing ``config.min_protrusion`` proud that ``handle_proposals``
     (``main``, its (box, mask) list) misses: none of ``main`` and none of these holds the other's
     centre. Empty when ``config.min_protrusion`` is 0."""
-    from opend_mj.policy.handle import centres_overlap
+    from opend_mj.policy.handle_box import centres_overlap
 
     if config.min_protrusion <= 0:
         return []

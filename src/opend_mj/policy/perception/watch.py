@@ -9,7 +9,7 @@ turned about a vertical axis (a side-hinged door) and a horizontal one (a flap),
 handle is now as that motion carries it (about the hinge line seen in the first image, for a door);
 every step, the grasp site relative to that handle (m) says whether the hand is still with it.
 Nothing here reads ground truth: the inputs are the depth images, the camera view, the first
-image's percept (`policy.learned.bc.HandlePercept`) and the hand's own grasp site.
+image's percept (`policy.learned.bc_model.HandlePercept`) and the hand's own grasp site.
 """
 
 from __future__ import annotations
@@ -73,7 +73,8 @@ class FrontWatcher:
 
     @classmethod
     def from_percept(cls, first_depth, view, percept, config: WatchConfig = WatchConfig()) -> "FrontWatcher":
-        """A watcher of the handle ``percept`` (`policy.learned.bc.HandlePercept`) found in ``first_depth``."""
+        """A watcher of the handle ``percept`` (`policy.learned.bc_model.HandlePercept`) found in
+        ``first_depth``."""
         return cls(first_depth, view, percept.handle.centre, percept.handle.panel_x,
                    getattr(percept, "hinge_point", None), config)
 

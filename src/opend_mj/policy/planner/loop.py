@@ -9,7 +9,7 @@ from dataclasses import replace
 from typing import Callable
 
 from opend_mj.language import InstructionNotUnderstood, target_kind
-from opend_mj.policy.handle import NO_HANDLE, HandleSolver, centres_overlap
+from opend_mj.policy.handle_box import NO_HANDLE, HandleSolver, centres_overlap
 from opend_mj.policy.perception import (
     estimate_handle,
     measure_handle,

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj.language import describe_instruction
-from opend_mj.policy.handle import NO_HANDLE, centres_overlap
+from opend_mj.policy.handle_box import NO_HANDLE, centres_overlap
 from opend_mj.policy.learned.detector.matching import box_orientation, consistent_choice, match_instruction
 from opend_mj.policy.learned.detector.model import KIND_LABELS, Detections, detect_handles, load_detector
 from opend_mj.resources import default_checkpoint
@@ -197,7 +197,7 @@ class FasterRCNNSolver:
         pairs of handles the robot moved and saw the kind of, or of boxes it found empty (a retry
         after a wrong handle or an empty box)."""
         from opend_mj.language import canonical_instruction
-        from opend_mj.policy.handle import HandleBox
+        from opend_mj.policy.handle_box import HandleBox
 
         if self.canonical:
             instruction = canonical_instruction(instruction)

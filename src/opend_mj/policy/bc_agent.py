@@ -2,10 +2,10 @@
 
 On the first step a shipped handle solver (``fasterrcnn`` by default, or ``cliport``) finds the
 instructed handle in the RGB-D image, and the planner's perception back-projects it
-(`policy.learned.bc.perceive_handle`); from then on, every control step, the transformer reads that
+(`policy.learned.bc_model.perceive_handle`); from then on, every control step, the transformer reads that
 handle, the instruction, the hand's own state and, for a checkpoint that watches (``watch``), the
 instructed front as the latest depth image shows it (`policy.perception.watch`: a new image every
-``watch`` control steps, ``image_every``) (`policy.learned.bc`) and predicts the next
+``watch`` control steps, ``image_every``) (`policy.learned.bc_model`) and predicts the next
 ``chunk`` actions; the action sent blends every prediction made for this step, oldest weighted most
 (ACT's temporal ensemble, weight ``exp(-ensemble_decay * i)`` for the i-th oldest). Several
 checkpoints (``checkpoint=a.pt,b.pt,c.pt``, or one bundle file of `opend bundle-policy`) form a seed
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from opend_mj import resources
-from opend_mj.policy.learned.bc import (STEP_KEYS, WATCH_KEY, checkpoint_paths, context_features, decode_action,
-                                        load_policies, step_actions, step_features)
+from opend_mj.policy.learned.bc_model import (STEP_KEYS, WATCH_KEY, checkpoint_paths, context_features,
+                                              decode_action, load_policies, step_actions, step_features)
 from opend_mj.policy.perception.watch import FrontWatcher, WatchConfig
 
 
@@ -131,7 +131,7 @@ class BCAgent:
         if self._ctx is None:
             if self.stopped:
                 return None
-            from opend_mj.policy.learned.bc import perceive_handle
+            from opend_mj.policy.learned.bc_model import perceive_handle
 
             self.percept = perceive_handle(self.solver, obs["rgb"], obs["depth"], obs["instruction"],
                                            self._episode.camera_view)
