@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     hands = {h: r for h, r in hands.items() if r}
     if not hands:
         parser.error(f"{args.rounds}: no kept rounds (round_<i>.json under <hand>/)")
-    fig, axes = plt.subplots(1, len(hands), figsize=(3.6 * len(hands), 3.6), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(hands), figsize=(max(6.0, 3.6 * len(hands)), 3.8), squeeze=False, sharey=True)
     for ax, (hand, rounds) in zip(axes[0], hands.items()):
         x = [r["round"] for r in rounds]
         line, = ax.plot(x, [r["val_success"] for r in rounds], marker="o", label="validation")
