@@ -238,7 +238,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     ``keep`` (default: ``folder``): where each round's policy (``round_<i>.pt``, float16 weights) and
     its figures (``round_<i>.json``: validation success overall and per kind, data sizes, wall
     seconds per stage) are kept: a small folder meant for the repository, so that a later run
-    continues from the last round kept instead of starting over. ``folder`` holds what can be
+    continues after the latest kept round instead of starting over. ``folder`` holds what can be
     made again: the rollouts (``round_<i>.hdf5``; missing ones are recorded again, deterministically,
     from the kept policies), the validation episodes and the final policy. A killed run loses at
     most the round in flight. Returns the summary (also ``folder/dagger.json``)."""

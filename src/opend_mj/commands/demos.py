@@ -106,7 +106,7 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
                    "[build/dagger/<hand>].")
 @click.option("--keep-rounds", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="DAgger: each round's policy (float16) and validation figures, kept so that a later run "
-                   "continues from the last round kept [checkpoints/bc_rounds/<hand>].")
+                   "continues after the latest kept round [checkpoints/bc_rounds/<hand>].")
 @click.option("--beta0", type=click.FloatRange(0, 1), default=0.5, show_default=True,
               help="DAgger: the share of steps at which the expert's action is stepped in round 1.")
 @click.option("--beta-decay", type=click.FloatRange(0, 1), default=0.5, show_default=True,
