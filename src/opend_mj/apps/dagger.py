@@ -242,6 +242,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     made again: the rollouts (``round_<i>.hdf5``; missing ones are recorded again, deterministically,
     from the kept policies), the validation episodes and the final policy. A killed run loses at
     most the round in flight. Returns the summary (also ``folder/dagger.json``)."""
+    import shutil
     from dataclasses import replace
 
     from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, record_demos
@@ -265,6 +266,15 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                "validation": {"cabinets": len(val_cabs), "targets": len(val_jobs), "seed": config.val_seed},
                "rounds": []}
     data_files: list[Path] = []
+    loaded: dict = {}
+
+    def rollouts_of(files: list[Path]) -> list:
+        """The labelled rollouts of ``files``, read once for the latest list asked for."""
+        key = tuple(files)
+        if key not in loaded:
+            loaded.clear()
+            loaded[key] = load_training_demos(list(files), hand=hand, successes_only=False) if files else []
+        return loaded[key]
 
     def timed(stage: str, seconds: dict, fn):
         t0 = time.perf_counter()
@@ -293,7 +303,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
             entry = json.loads(figures.read_text())
             log(f"round {round_}: kept ({ckpt}): validation {entry['val_success']} %")
         else:
-            labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
+            labelled = rollouts_of(data_files)
             steps, init = config.round_training(round_, bc_config.steps, keep / f"round_{round_ - 1}.pt")
             log(f"round {round_}: training on {len(demos)} demonstrations and {len(labelled)} labelled rollouts "
                 f"({steps} steps{', from ' + str(init) if init else ''})")
@@ -302,6 +312,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                 demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=work,
                 progress=progress, threads=threads, init=init))
             save_half(work, ckpt)  # the policy kept, validated and rolled out: float16 weights
+            shutil.copyfile(work.with_suffix(".json"), ckpt.with_suffix(".train.json"))  # its training summary
             val_out = folder / f"val_{round_}.jsonl"
             val_out.unlink(missing_ok=True)  # episodes of a policy trained before this one
             jobs = [replace(j, policy="bc", policy_args=(("checkpoint", str(ckpt)), ("solver", solver)),
@@ -320,7 +331,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
     final = folder / "final.pt"
     best = keep / f"round_{summary['chosen']}.pt"
-    labelled = load_training_demos(data_files, hand=hand, successes_only=False) if data_files else []
+    labelled = rollouts_of(data_files)
     steps, init = config.final_training(bc_config.steps, best)
     plan = {"from_round": summary["chosen"], "rounds": config.rounds, "steps": steps, "demos": len(all_demos),
             "rollouts": len(labelled), "warm_start": init is not None}
@@ -343,10 +354,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
 
 def save_half(src: Path, dst: Path) -> None:
     """Copy the checkpoint ``src`` of `bc_train.train_bc` to ``dst`` with its weights as float16
-    (half the bytes; the policy loads them as float32), and its ``.json`` summary beside it as
-    ``<dst>.train.json``."""
-    import shutil
-
+    (half the bytes; the policy loads them as float32)."""
     from opend_mj.policy.learned.checkpoint_io import read_checkpoint, write_checkpoint
 
     ckpt = read_checkpoint(src, "behaviour-cloning policy checkpoint")
@@ -355,7 +363,6 @@ def save_half(src: Path, dst: Path) -> None:
     tmp = dst.with_suffix(".tmp")
     write_checkpoint(ckpt, tmp)
     tmp.replace(dst)
-    shutil.copyfile(src.with_suffix(".json"), dst.with_suffix(".train.json"))
 
 
 __all__ = ["DaggerConfig", "Rollout", "best_round", "rollout_episode", "run_dagger", "save_half", "split_cabinets",

@@ -180,7 +180,6 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
     final = Path(summary["final"]["checkpoint"])
     save_half(final, out)
     trained = json.loads(final.with_suffix(".json").read_text())
-    out.with_suffix(".train.json").unlink(missing_ok=True)
     out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
                                                            for r in summary["rounds"])
