@@ -121,6 +121,9 @@ ROUND_STEPS ?= 2000
 FINAL_STEPS ?= 6000
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
+## BC_THREADS: torch threads of training (both cores by default; 1 where another job shares them:
+## more threads than free cores slow training many times over)
+BC_THREADS ?= $(WORKERS)
 BC_ARGS ?=
 train-bc: install assets
 	@t=$$(date +%s); $(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) \
@@ -129,7 +132,7 @@ train-bc: install assets
 	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) \
 		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) \
 		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
-		--workers $(WORKERS) --threads $(WORKERS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \
+		--workers $(WORKERS) --threads $(BC_THREADS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \
 		echo "train-bc: DAgger rounds and final policy $$(( $$(date +%s) - t )) s"
 	@t=$$(date +%s); rm -f results/bc/$(HAND)_shipped_test.jsonl; $(BIN)/opend run --policy bc \
 		--policy-arg checkpoint=checkpoints/bc_$(HAND).pt --hand $(HAND) --split test --cabinets $(CABINETS) \
