@@ -89,7 +89,7 @@ def test_excluded_targets_count_as_failures(tmp_path):
     payload = json.loads(path.read_text())
     assert payload["targets"] == 5 and payload["excluded_targets"] == 1
     assert payload["scores"]["oracle"]["allegro"]["overall"] == {"episodes": 5, "open20": 2, "open50": 1,
-                                                                  "range75": 1}
+                                                                  "range75": 1, "endings": {"excluded": 1}}
     manifest.write_text("{not json")
     with pytest.raises(ValueError, match="manifest.json"):
         write_summary(RECORDS, tmp_path / "s.json", manifest=manifest)
@@ -197,3 +197,36 @@ def test_a_fifth_hand_is_one_folder(tmp_path, monkeypatch):
         monkeypatch.delenv(hands.HANDS_DIR_ENV)
         assert "lefty" not in hands.builtin_hands()  # back to the shipped hands
     assert "lefty" not in hands.list_hands()
+
+
+def test_report_says_where_each_hands_bc_failures_end(tmp_path):
+    """The shipped policies' failures, per hand and kind, by ending: counted from the generated records
+    and carried by the real aggregate (counts only), the build's excluded targets among them; an
+    aggregate written before endings were counted shows "-" rather than zeros."""
+    from opend_mj.evaluation.report import endings_section
+
+    results = tmp_path / "results"
+    (results / "bc").mkdir(parents=True)
+    (results / "real").mkdir()
+    bc = [_record("c1", "joint_0", "allegro", "drawer", 0.9, 0.95, solver="bc-fasterrcnn"),
+          _record("c1", "joint_1", "allegro", "door", 0.05, 0.1, solver="bc-fasterrcnn", ending="slipped"),
+          _record("c2", "joint_0", "allegro", "door", 0.0, 0.0, solver="bc-fasterrcnn", ending="never_reached"),
+          _record("c2", "joint_1", "allegro", "door", 0.01, 0.0, solver="bc-fasterrcnn", ending="slipped")]
+    (results / "bc" / "allegro_shipped_test.jsonl").write_text("".join(json.dumps(r) + "\n" for r in bc))
+    manifest = tmp_path / "manifest.json"
+    manifest.write_text(json.dumps({"excluded_targets": [{"id": "c3", "joint": "joint_0", "type": "door"}]}))
+    summary = write_summary(bc, results / "real" / "bc_allegro_all.json", manifest=manifest)
+    door = json.loads(summary.read_text())["scores"]["bc-fasterrcnn"]["allegro"]["door"]
+    assert door["endings"] == {"slipped": 2, "never_reached": 1, "excluded": 1}
+    old = [dict(r, hand="shadow") for r in bc]
+    write_summary([{k: v for k, v in r.items() if k != "ending"} for r in old],
+                  results / "real" / "bc_shadow_all.json")
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in endings_section(results)
+            if line.startswith("| ") and not line.startswith("| hand")]
+    by = {tuple(r[:2]): r[2:] for r in rows}
+    # drawers / doors: episodes, failures, never reached, never held, slipped, stalled, pushed back, excluded
+    assert by[("Allegro", "generated")] == ["1 / 3", "0 / 3", "0 / 1", "0 / 0", "0 / 2", "0 / 0", "0 / 0", "0 / 0"]
+    assert by[("Allegro", "real")] == ["1 / 4", "0 / 4", "0 / 1", "0 / 0", "0 / 2", "0 / 0", "0 / 0", "0 / 1"]
+    assert by[("Shadow", "real")] == ["1 / 3", "0 / 3"] + ["0 / -"] * 6
+    assert "## Where the behaviour-cloning policies' failures end" in write_report(
+        results, tmp_path / "results.md").read_text()

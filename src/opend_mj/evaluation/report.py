@@ -62,19 +62,34 @@ def succeeded(record: dict, criterion: str) -> bool:
     raise ValueError(f"unknown success criterion {criterion!r}; known: {[c for c, _ in CRITERIA]}")
 
 
+def failure_ending(record: dict) -> str | None:
+    """Where a failed episode (open ratio <= 20 %) ended: its ``ending`` (agents' runs,
+    `grading.episode_ending`), ``excluded`` for a target the build excluded, else None."""
+    if succeeded(record, "open20"):
+        return None
+    if record.get("failed_stage") == "excluded":
+        return "excluded"
+    return record.get("ending")
+
+
 def summarize(records: list[dict]) -> dict:
-    """Per (solver, hand): episodes and successes under every criterion, by target kind and overall.
+    """Per (solver, hand): episodes and successes under every criterion, by target kind and overall,
+    and, where the records carry it, how many failures ended where (``endings``: `failure_ending`).
 
     The result holds counts only (no cabinet ids), so it may be committed for real cabinets."""
     out: dict[str, dict] = {}
     for r in records:
         cell = out.setdefault(r["solver"], {}).setdefault(r["hand"], {})
         kinds = ["overall"] + ([r["target_type"]] if r.get("target_type") in ("drawer", "door") else [])
+        ending = failure_ending(r)
         for kind in kinds:
             counts = cell.setdefault(kind, {"episodes": 0, **{c: 0 for c, _ in CRITERIA}})
             counts["episodes"] += 1
             for c, _ in CRITERIA:
                 counts[c] += int(succeeded(r, c))
+            if ending is not None:
+                endings = counts.setdefault("endings", {})
+                endings[ending] = endings.get(ending, 0) + 1
     return out
 
 
@@ -272,9 +287,43 @@ def results_markdown(results_dir: Path) -> str:
                 "| condition | " + " | ".join(hand_title(h) for h in report_hands()) + " |",
                 "|---" * (len(report_hands()) + 1) + "|"]
         out += rows + [""]
+    out += endings_section(results_dir)
     out += robustness_sections(results_dir)
     out += expert_sections(results_dir)
     return "\n".join(out)
+
+
+def endings_section(results_dir: Path) -> list[str]:
+    """Where the shipped behaviour-cloning policies' failed episodes end, per hand and kind, on the
+    generated test split (the records) and on real cabinets (the aggregates' ``endings``; a summary
+    written before they were counted shows "-")."""
+    from opend_mj.evaluation.grading import ENDINGS
+
+    rs = next(r for r in RESULT_SETS if r.solver.startswith("bc"))
+    generated = _load_generated(Path(results_dir) / rs.generated).get(rs.solver, {})
+    real = _load_real(Path(results_dir) / "real" / rs.real)[0].get(rs.solver, {})
+    columns = ENDINGS + ("excluded",)
+    rows = []
+    for hand in report_hands():
+        for where, scores in (("generated", generated), ("real", real)):
+            if hand not in scores:
+                continue
+            cells = [scores[hand].get(kind) or {"episodes": 0, "open20": 0} for kind in ("drawer", "door")]
+            fails = [c["episodes"] - c["open20"] for c in cells]
+            counts = [" / ".join(str((c.get("endings") or {}).get(e, 0)) if c.get("endings") is not None or not f
+                                 else "-" for c, f in zip(cells, fails)) for e in columns]
+            rows.append(f"| {hand_title(hand)} | {where} | {cells[0]['episodes']} / {cells[1]['episodes']} | "
+                        f"{fails[0]} / {fails[1]} | " + " | ".join(counts) + " |")
+    if not rows:
+        return []
+    return ["## Where the behaviour-cloning policies' failures end", "",
+            "Failed episodes (open ratio <= 20 %) of the shipped policies above, drawers / doors, by where they "
+            "ended (ground truth, for this table only; `grading.episode_ending`): never reached (the hand never "
+            "came within 2 cm of the handle), never held (the part never opened 3 %), slipped (off the moved "
+            "part for the last 0.5 s), stalled (on it to the end, short of 20 %), pushed back (had opened 5 % "
+            "or more, ends below half of that), excluded (the build's feasibility check left the target out).", "",
+            "| hand | cabinets | episodes | failures | " + " | ".join(e.replace("_", " ") for e in columns)
+            + " |", "|" + "---|" * (4 + len(columns))] + rows + [""]
 
 
 def expert_sections(results_dir: Path) -> list[str]:
@@ -309,19 +358,24 @@ def robustness_sections(results_dir: Path) -> list[str]:
     (results/real/robustness_*.json, counts only), each summarised per solver and hand
     (`robustness.table_summary_markdown`) with the label of the run that made it; every cell is in
     the table beside the JSON (``.md`` for generated cabinets, ``.png`` for both)."""
-    from opend_mj.evaluation.robustness import load_table, table_summary_markdown
+    from opend_mj.evaluation.robustness import load_table, summary_legend, table_summary_markdown
 
     results_dir = Path(results_dir)
     out = []
-    for title, paths in (("generated cabinets", sorted((results_dir / "robustness").glob("*.json"))),
-                         ("real cabinets", sorted((results_dir / "real").glob("robustness_*.json")))):
-        tables = {path: load_table(path) for path in paths}
+    sets = [(title, {path: load_table(path) for path in paths}) for title, paths in (
+        ("generated cabinets", sorted((results_dir / "robustness").glob("*.json"))),
+        ("real cabinets", sorted((results_dir / "real").glob("robustness_*.json"))))]
+    bands = next((t["bands"] for _, tables in sets for t in tables.values()), None)
+    if bands is not None:  # what the columns hold, once for every table with these bands
+        out += ["## Robustness", "", summary_legend(bands) + " docs/robustness.md.", ""]
+    for title, tables in sets:
         for path, table in tables.items():
             full = [p.relative_to(results_dir.parent).as_posix() for p in (path.with_suffix(".md"),
                                                                            path.with_suffix(".png")) if p.is_file()]
-            out += [table_summary_markdown(table, f"Robustness, {title} (`{path.relative_to(results_dir.parent)}`)"),
+            out += [table_summary_markdown(table, f"{title} (`{path.relative_to(results_dir.parent)}`)",
+                                           heading="###", legend=table["bands"] != bands),
                     f"Made by: `{table.get('command') or 'opend robustness'}` ({table.get('label', '')}); "
-                    f"every cell: {', '.join(f'`{p}`' for p in full) or 'the JSON'}; docs/robustness.md.", ""]
+                    f"every cell: {', '.join(f'`{p}`' for p in full) or 'the JSON'}.", ""]
             again = measured_again(path, tables)
             if again:
                 out += ["Also in another run (with its own nominal): " + "; ".join(

@@ -140,15 +140,20 @@ def table_markdown(table: dict, title: str = "Robustness") -> str:
     return "\n".join(lines) + "\n"
 
 
-def table_summary_markdown(table: dict, title: str = "Robustness") -> str:
+def summary_legend(bands: dict) -> str:
+    """What the columns of `table_summary_markdown` hold, for the bands (points) of its table."""
+    return (f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (successes/episodes) at nominal; "
+            f"the largest drop in points under a mild and a strong level; the conditions beyond their band "
+            f"({bands['mild']:g} points mild, {bands['strong']:g} strong).")
+
+
+def table_summary_markdown(table: dict, title: str = "Robustness", heading: str = "##",
+                           legend: bool = True) -> str:
     """One row per (solver, hand): the nominal cell, the largest drop under a mild and under a strong
     level (points against nominal, and where), and the conditions outside their band; the full
-    table (`table_markdown`) has every cell."""
-    b = table["bands"]
-    lines = [f"## {title}", "",
-             f"Success (open ratio > 20 %) in percent, [95 % Wilson interval], (successes/episodes) at nominal; "
-             f"the largest drop in points under a mild and a strong level; the conditions beyond their band "
-             f"({b['mild']:g} points mild, {b['strong']:g} strong).", "",
+    table (`table_markdown`) has every cell. ``legend``: say what the columns hold (a page of
+    several tables with the same bands says it once, `summary_legend`)."""
+    lines = [f"{heading} {title}", ""] + ([summary_legend(table["bands"]), ""] if legend else []) + [
              "| solver / agent | hand | axes | nominal | worst mild | worst strong | outside the bands |",
              "|---|---|---|---|---|---|---|"]
     for row in table["rows"]:
