@@ -419,6 +419,43 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     assert outcomes((folder / "round_1.hdf5.episodes.jsonl").read_text()) == outcomes(log)
 
 
+def test_dagger_revisits_the_targets_its_rollouts_failed(demos_file, small_dataset, tmp_path):
+    """`--revisit 1`: after a round's rollouts, the training targets whose rollout did not open their
+    part are rolled out once more at an episode seed of their own, by the same policy, and labelled by
+    the expert; the round trains on both and says how many it revisited. A later run with another
+    --revisit makes a kept round's rollouts again as that round made them."""
+    from opend_mj.apps.dagger import DaggerConfig, failed_targets
+    from opend_mj.apps.demos import read_demos
+
+    out, _ = demos_file
+    folder, keep = tmp_path / "dagger", tmp_path / "kept"
+    args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "5",
+            "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
+            str(folder), "--keep-rounds", str(keep), "--dagger-targets", "2", "--val-targets", "1",
+            "--final-steps", "5", "--revisit", "1", "--no-progress"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    failed = failed_targets(folder / "round_1.hdf5.episodes.jsonl")
+    entry = json.loads((keep / "round_1.json").read_text())
+    assert entry["revisit"] == 1 and entry["revisited"] == len(failed)
+    seed = DaggerConfig().revisit_seed(1, 0)
+    assert seed not in (11, 100)
+    extra = folder / "round_1_revisit_0.hdf5"
+    if failed:  # a policy trained for 5 steps opens little; whatever failed is rolled out again
+        lines = [json.loads(x) for x in (folder / "round_1_revisit_0.hdf5.episodes.jsonl").read_text().splitlines()]
+        assert {(x["cabinet"], x["joint"]) for x in lines} == failed and {x["seed"] for x in lines} == {seed}
+        _, revisits = read_demos(extra)
+        assert all(d.attrs["labels"] == "expert" and d.attrs["seed"] == seed for d in revisits)
+        _, firsts = read_demos(folder / "round_1.hdf5")
+        assert entry["rollouts"] == len(firsts) + len(revisits)
+    else:
+        assert not extra.exists()
+    again = CliRunner().invoke(main, [a if a != "1" or i != args.index("--revisit") + 1 else "2"
+                                      for i, a in enumerate(args)])
+    assert again.exit_code == 0, again.output
+    assert not (folder / "round_1_revisit_1.hdf5").exists()  # round 1 was kept with one revisit
+
+
 def test_rounds_warm_start_from_the_previous_policy_and_the_final_policy_from_the_best_round(tmp_path):
     from opend_mj.apps.dagger import DaggerConfig
 

@@ -81,9 +81,18 @@ class DaggerConfig:
     warm_start: bool = True  # rounds after round 0 (and the final policy) start from a previous policy
     round_steps: int | None = None  # optimiser steps of the rounds after round 0
     init: Path | None = None  # round 0 starts from this checkpoint (None: from scratch)
+    #: Each round after round 0 also rolls out, this many times more at other episode seeds, the
+    #: training targets whose rollout of that round failed: the learner's hard cases (rare layouts,
+    #: handles near the floor) get more of the expert's labels than their share of the cabinets.
+    revisit: int = 0
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
+
+    def revisit_seed(self, round_: int, visit: int) -> int:
+        """The episode seed of the ``visit``-th (0-based) revisit of round ``round_``'s failed targets:
+        apart from every round's rollout seed and from the validation seed."""
+        return self.rollout_seed + 1000 * (visit + 1) + round_
 
     def round_training(self, round_: int, steps: int, previous: Path | None) -> tuple[int, Path | None]:
         """(optimiser steps, checkpoint to start from or None) of round ``round_``'s training, where
@@ -203,6 +212,19 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     return line, demo
 
 
+def failed_targets(log: Path) -> set[tuple[str, str]]:
+    """(cabinet, joint) of the rollouts in a round's episode log (`planner_demos.log_path`) that did
+    not open their part."""
+    out = set()
+    if log.is_file():
+        for line in log.read_text().splitlines():
+            if line.strip():
+                entry = json.loads(line)
+                if not entry.get("success"):
+                    out.add((entry["cabinet"], entry["joint"]))
+    return out
+
+
 def split_cabinets(jobs, share: float, seed: int) -> tuple[set, set]:
     """(training cabinets, validation cabinets) of ``jobs``: ``share`` of the cabinets, drawn from ``seed``."""
     cabinets = sorted({j.cabinet for j in jobs})
@@ -245,7 +267,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     import shutil
     from dataclasses import replace
 
-    from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, record_demos
+    from opend_mj.apps.planner_demos import RecordConfig, load_training_demos, log_path, record_demos
     from opend_mj.evaluation.jobs import make_jobs
     from opend_mj.evaluation.pool import run_jobs
     from opend_mj.evaluation.results import load_results
@@ -286,6 +308,10 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     for round_ in range(config.rounds + 1):
         ckpt, figures = keep / f"round_{round_}.pt", keep / f"round_{round_}.json"
         seconds: dict = {}
+        kept = ckpt.is_file() and figures.is_file()
+        # a kept round's rollouts are made again as it made them (rounds kept before revisits had none)
+        revisit = json.loads(figures.read_text()).get("revisit", 0) if kept else config.revisit
+        revisited = 0
         if round_ > 0:
             previous = keep / f"round_{round_ - 1}.pt"
             rollout = Rollout(policy="bc", policy_args=(("checkpoint", str(previous)), ("solver", solver)),
@@ -299,7 +325,19 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                 jobs, data, workers=workers, config=RecordConfig(keep_failures=True, rollout=rollout),
                 progress=progress))
             data_files.append(data)
-        if ckpt.is_file() and figures.is_file():
+            failed = failed_targets(log_path(data)) if revisit else set()
+            again = [j for j in jobs if (j.cabinet, j.joint) in failed]
+            for visit in range(revisit if again else 0):
+                seed = config.revisit_seed(round_, visit)
+                extra = folder / f"round_{round_}_revisit_{visit}.hdf5"
+                log(f"round {round_}: revisit {visit + 1} of the {len(again)} targets whose rollout failed "
+                    f"(episode seed {seed})")
+                timed(f"revisit_{visit}", seconds, lambda: record_demos(
+                    [replace(j, seed=seed) for j in again], extra, workers=workers,
+                    config=RecordConfig(keep_failures=True, rollout=rollout), progress=progress))
+                data_files.append(extra)
+                revisited += len(again)
+        if kept:
             entry = json.loads(figures.read_text())
             log(f"round {round_}: kept ({ckpt}): validation {entry['val_success']} %")
         else:
@@ -322,6 +360,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                      "samples": trained.get("samples"), "steps": steps, "init": str(init) if init else None,
                      "beta": config.beta(round_) if round_ else None,
                      "rollout_seed": config.rollout_seed + round_ if round_ else None,
+                     "revisit": revisit, "revisited": revisited,
                      **validation_figures(list(load_results(val_out))), "seconds": seconds}
             figures.write_text(json.dumps(entry, indent=1) + "\n")
             log(f"round {round_}: validation {entry['val_success']} % (drawers {entry['val_drawer']} %, doors "
@@ -365,5 +404,5 @@ def save_half(src: Path, dst: Path) -> None:
     tmp.replace(dst)
 
 
-__all__ = ["DaggerConfig", "Rollout", "best_round", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
+__all__ = ["DaggerConfig", "Rollout", "best_round", "failed_targets", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
            "validation_figures"]
