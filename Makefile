@@ -113,10 +113,12 @@ expert-check: install
 ## checkpoints/bc_$(HAND).pt, then its record on the generated test split. Prints each stage's wall time.
 ## HAND=allegro DAGGER=3 (rounds after round 0) SEEDS=2 STEPS=3000 (round 0) ROUND_STEPS=2000 (later
 ## rounds, warm-started) FINAL_STEPS=6000 REVISIT=1 (each round's failed rollouts rolled out again, at
-## other seeds; kept rounds keep their own); BC_ARGS: more `opend train-policy` options (--grasp-token).
+## other seeds) HOLD=1 (rollouts go on to the policy's stop after the expert's plan opened the part,
+## labelled "stay"); kept rounds keep their own; BC_ARGS: more `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3
 REVISIT ?= 1
+HOLD ?= 1
 SEEDS ?= 2
 STEPS ?= 3000
 ROUND_STEPS ?= 2000
@@ -133,6 +135,7 @@ train-bc: install assets
 		echo "train-bc: demonstrations $$(( $$(date +%s) - t )) s"
 	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) \
 		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --revisit $(REVISIT) \
+		$(if $(filter 1,$(HOLD)),--hold-after-plan,--no-hold-after-plan) \
 		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
 		--workers $(WORKERS) --threads $(BC_THREADS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \
 		echo "train-bc: DAgger rounds and final policy $$(( $$(date +%s) - t )) s"

@@ -5,7 +5,7 @@
 Each kept round's figures (``round_<i>.json`` in ``--rounds DIR/<hand>``) give its validation
 success on the training cabinets kept apart, overall and per kind; the plot has one panel per hand:
 overall (solid), drawers and doors (dashed, dotted), each overall point labelled with the labelled
-rollouts it trained on. Where the shipped policy's generated test-split record exists
+rollouts it trained on, and a square around the rounds that revisited their failed targets. Where the shipped policy's generated test-split record exists
 (``results/bc/<hand>_shipped_test.jsonl``), its success is a star after the last round. The figure
 shows where more rounds stop helping.
 """
@@ -48,6 +48,11 @@ def main(argv=None) -> int:
         for key, style in (("val_drawer", "--"), ("val_door", ":")):
             ax.plot(x, [r.get(key) for r in rounds], linestyle=style, color=line.get_color(), alpha=0.7,
                     label=key.split("_")[1] + "s")
+        revisited = [r for r in rounds if r.get("revisit")]
+        if revisited:  # rounds that also rolled out their failed targets again (`--revisit`)
+            ax.plot([r["round"] for r in revisited], [r["val_success"] for r in revisited], marker="s",
+                    markersize=8, markerfacecolor="none", color=line.get_color(), linestyle="none",
+                    label="with revisits")
         for r in rounds:
             ax.annotate(str(r["rollouts"]), (r["round"], r["val_success"]), textcoords="offset points",
                         xytext=(0, 7), ha="center", fontsize=7)

@@ -456,6 +456,35 @@ def test_dagger_revisits_the_targets_its_rollouts_failed(demos_file, small_datas
     assert not (folder / "round_1_revisit_1.hdf5").exists()  # round 1 was kept with one revisit
 
 
+def test_rollouts_hold_after_the_plan_opened_the_part(demos_file, small_dataset, tmp_path):
+    """`Rollout.hold`: where the expert's plan has ended with the part open, the rollout goes on to the
+    policy's stop, each later state labelled with the plan's last action (the hand stays where the
+    planner left it); without it the rollout ends with the plan."""
+    from opend_mj.apps.dagger import Rollout, rollout_episode
+    from opend_mj.apps.planner_demos import RecordConfig
+    from opend_mj.evaluation.runner import make_episode_env
+
+    out, _ = demos_file
+    ckpt = tmp_path / "bc.pt"
+    result = CliRunner().invoke(main, ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(ckpt),
+                                       "--steps", "5", "--batch-size", "16", "--d-model", "16", "--no-progress"])
+    assert result.exit_code == 0, result.output
+    job = _first_job(small_dataset)
+    runs = {}
+    for hold in (False, True):  # beta 1: the expert's actions are stepped, the policy only decides when to stop
+        rollout = Rollout(policy="bc", policy_args=(("checkpoint", str(ckpt)), ("stop_time", "12.0")), beta=1.0,
+                          hold=hold)
+        runs[hold] = rollout_episode(job, make_episode_env(job), RecordConfig(keep_failures=True, rollout=rollout))
+    (line, demo), (held_line, held) = runs[False], runs[True]
+    assert line["success"] and line["ended"] == "expert_finished" and line["held"] == 0
+    assert held_line["ended"] == "policy_stopped" and held_line["success"]
+    n = demo.num_samples
+    assert held_line["held"] == held.num_samples - n > 0 and held.attrs["held_steps"] == held_line["held"]
+    np.testing.assert_allclose(held.actions[:n], demo.actions)  # the same episode up to the plan's end
+    assert (held.actions[n:] == demo.actions[-1]).all()  # then the plan's last action
+    assert (held.num_samples - 1) / 60.0 <= 12.0 + 1e-6  # to the policy's stop (its stop_time, s)
+
+
 def test_rounds_warm_start_from_the_previous_policy_and_the_final_policy_from_the_best_round(tmp_path):
     from opend_mj.apps.dagger import DaggerConfig
 

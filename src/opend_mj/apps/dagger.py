@@ -34,12 +34,16 @@ import numpy as np
 @dataclass(frozen=True)
 class Rollout:
     """What a DAgger round's episodes run: the policy (an `opend run --policy` spec and its
-    constructor arguments) and the share ``beta`` of steps at which the expert's action is stepped."""
+    constructor arguments) and the share ``beta`` of steps at which the expert's action is stepped.
+    ``hold``: once the expert's plan has ended with the part open, the rollout goes on to the
+    policy's stop, each state labelled with the plan's last action (where the planner leaves the
+    hand), instead of ending there."""
 
     policy: str
     policy_args: tuple = ()
     beta: float = 0.0
     round: int = 1
+    hold: bool = False
 
     def __post_init__(self):
         if not 0.0 <= self.beta <= 1.0:
@@ -85,6 +89,10 @@ class DaggerConfig:
     #: training targets whose rollout of that round failed: the learner's hard cases (rare layouts,
     #: handles near the floor) get more of the expert's labels than their share of the cabinets.
     revisit: int = 0
+    #: Rollouts go on after the expert's plan ended with the part open, labelled with its last action
+    #: (`Rollout.hold`): the policy acts to its stop time, past where demonstrations end, and learns
+    #: to stay where the planner leaves the hand instead of wandering into the opened part.
+    hold: bool = False
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -137,6 +145,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     labels, executed, styles = [], [], []
     percept = None
     why = "time"
+    held = 0  # steps labelled with the finished plan's last action (`Rollout.hold`)
     try:
         with RGBDCamera(physics, "front", size, size) as cam:
             rgb, depth = cam.render()
@@ -153,13 +162,18 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
                     action = agent.act(obs)
                     percept = getattr(agent, "percept", None)
                     label = expert.action()
+                    holding = bool(label is None and rollout.hold and labels and (held or (
+                        expert.why == "finished" and task.outcome(physics).success)))
+                    if holding:
+                        label = labels[-1]  # the plan ended with the part open: the hand stays
                     if action is None or label is None or percept is None:
                         why = "policy_stopped" if action is None else ("expert_" + str(expert.why))
                         break
+                    held += holding
                     for k, v in proprio.items():
                         steps.setdefault(k, []).append(np.array(v, float))
                     labels.append(np.asarray(label, float))
-                    styles.append(style_index(expert.style))
+                    styles.append(style_index(expert.style))  # after the plan: its last style
                     sent = label if rng.random() < rollout.beta else np.asarray(action, float)
                     executed.append(sent)
                     watched = getattr(agent, "last_watch", None)
@@ -183,7 +197,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     n = len(labels)
     line = {"key": list(job.key()), "cabinet": job.cabinet, "joint": job.joint, "hand": job.hand, "seed": job.seed,
             "split": job.split, "success": bool(outcome.success), "open_ratio": round(float(outcome.open_ratio), 4),
-            "steps": n, "ended": why, "wall_seconds": round(time.perf_counter() - t0, 2)}
+            "steps": n, "held": held, "ended": why, "wall_seconds": round(time.perf_counter() - t0, 2)}
     if n == 0 or percept is None:
         return line, None
     feats = np.asarray(percept.vector(), float)
@@ -202,7 +216,7 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
         "handle_kind": percept.handle.kind, "handle_orientation": percept.handle.orientation,
         "hinge_seen": percept.hinge or "", "action_noise": "", "labels": "expert", "beta": float(rollout.beta),
         "policy": json.dumps([rollout.policy, [list(a) for a in rollout.policy_args]]), "dagger_round": rollout.round,
-        "expert_restarts": int(expert.restarts),
+        "expert_restarts": int(expert.restarts), "held_steps": int(held),
         "watch_every": int(agent_image_every(agent)) if WATCH_KEY in obs_arrays else 0,
     }
     demo = Demo(actions=np.asarray(labels, float).reshape(n, -1), obs=obs_arrays, attrs=attrs,
@@ -310,12 +324,14 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         seconds: dict = {}
         kept = ckpt.is_file() and figures.is_file()
         # a kept round's rollouts are made again as it made them (rounds kept before revisits had none)
-        revisit = json.loads(figures.read_text()).get("revisit", 0) if kept else config.revisit
+        made = json.loads(figures.read_text()) if kept else {}
+        revisit = made.get("revisit", 0) if kept else config.revisit
+        hold = made.get("hold", False) if kept else config.hold
         revisited = 0
         if round_ > 0:
             previous = keep / f"round_{round_ - 1}.pt"
             rollout = Rollout(policy="bc", policy_args=(("checkpoint", str(previous)), ("solver", solver)),
-                              beta=config.beta(round_), round=round_)
+                              beta=config.beta(round_), round=round_, hold=hold)
             jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.rollout_seed + round_,
                              cabinet_ids=sorted(train_cabs))[:config.limit]
             data = folder / f"round_{round_}.hdf5"
@@ -360,7 +376,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                      "samples": trained.get("samples"), "steps": steps, "init": str(init) if init else None,
                      "beta": config.beta(round_) if round_ else None,
                      "rollout_seed": config.rollout_seed + round_ if round_ else None,
-                     "revisit": revisit, "revisited": revisited,
+                     "revisit": revisit, "revisited": revisited, "hold": hold,
                      **validation_figures(list(load_results(val_out))), "seconds": seconds}
             figures.write_text(json.dumps(entry, indent=1) + "\n")
             log(f"round {round_}: validation {entry['val_success']} % (drawers {entry['val_drawer']} %, doors "

@@ -120,6 +120,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--revisit", type=click.IntRange(min=0), default=0, show_default=True,
               help="DAgger: roll out the training targets whose rollout failed this many times more per round, "
                    "at other episode seeds (more expert labels where the policy fails).")
+@click.option("--hold-after-plan/--no-hold-after-plan", default=False, show_default=True,
+              help="DAgger: rollouts go on after the expert's plan ended with the part open, to the policy's "
+                   "stop, labelled with the plan's last action (the hand stays where the planner leaves it).")
 @click.option("--val-targets", type=click.IntRange(min=1), default=None,
               help="DAgger: validate on the first K validation targets only [all].")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
@@ -128,7 +131,8 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, watch, kind, seed,
                  init,
                  warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, keep_rounds, beta0, beta_decay,
-                 dagger_targets, final_steps, round_steps, revisit, val_targets, workers, progress):
+                 dagger_targets, final_steps, round_steps, revisit, hold_after_plan, val_targets, workers,
+                 progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
 
@@ -149,7 +153,8 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
 
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
                               limit=dagger_targets, val_limit=val_targets, final_steps=final_steps,
-                              warm_start=warm_start, init=init, round_steps=round_steps, revisit=revisit)
+                              warm_start=warm_start, init=init, round_steps=round_steps, revisit=revisit,
+                              hold=hold_after_plan)
         _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, keep_rounds, workers,
                            threads, progress)
         return
