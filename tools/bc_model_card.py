@@ -1,0 +1,153 @@
+"""Write a shipped behaviour-cloning policy's model card, checkpoints/bc_<hand>.md, from its files.
+
+    python tools/bc_model_card.py --hand shadow          # every hand: --hand repeated, or none
+
+Everything on the card is read from what `make train-bc HAND=<hand>` and the real-cabinet run left:
+the checkpoint's summary (``checkpoints/bc_<hand>.json``: model, data, the DAgger rounds, the final
+policy), the kept rounds (``checkpoints/bc_rounds/<hand>/round_<i>.json``: validation figures and
+wall seconds per stage), the generated test-split record (``results/bc/<hand>_shipped_test.jsonl``)
+and the real-cabinet counts (``results/real/bc_<hand>_all.json``), so the card and the figures
+cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rate(k: int, n: int) -> str:
+    return f"{100.0 * k / max(1, n):.1f} % ({k}/{n})"
+
+
+def _kept_rounds(folder: Path) -> list[dict]:
+    rounds = [json.loads(p.read_text()) for p in folder.glob("round_*.json") if not p.name.endswith(".train.json")]
+    return sorted(rounds, key=lambda r: r["round"])
+
+
+def _test_cells(path: Path) -> dict | None:
+    """Successes (open ratio > 20 %) on the generated test split, by kind, and at >= 75 % of the range."""
+    if not path.is_file():
+        return None
+    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    cells = {"all": records, **{k: [r for r in records if r.get("target_type") == k] for k in ("drawer", "door")}}
+    return {"n": {k: len(v) for k, v in cells.items()},
+            "ok": {k: sum(bool(r.get("success")) for r in v) for k, v in cells.items()},
+            "range75": sum(float(r.get("range_ratio") or 0.0) >= 0.75 for r in records)}
+
+
+def _seconds(rounds: list[dict], stage: str) -> str:
+    values = [r["seconds"][stage] for r in rounds if r.get("seconds", {}).get(stage, 0) > 1.0]
+    if not values:
+        return "-"
+    lo, hi = min(values), max(values)
+    return f"{lo:.0f} s" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} s"
+
+
+def model_card(hand: str, root: Path = ROOT) -> str:
+    """The card's markdown for ``hand``."""
+    summary = json.loads((root / "checkpoints" / f"bc_{hand}.json").read_text())
+    ckpt = root / "checkpoints" / f"bc_{hand}.pt"
+    config, dagger = summary["config"], summary.get("dagger") or {}
+    rounds = _kept_rounds(root / "checkpoints" / "bc_rounds" / hand)
+    final = dagger.get("final", {})
+    watch = int(config.get("watch") or 0)
+    from opend_mj.evaluation.report import hand_title
+
+    title = f"# Model card: `bc_{hand}.pt` (behaviour cloning with DAgger, {hand_title(hand)}" + (
+        ", watching the front)" if watch else ")")
+    rows = [
+        ("model", f"ACT-style transformer over action chunks ({config['d_model']} wide, {config['chunk']}-action "
+                  f"chunks{', grasp-style token' if config.get('modes') else ''}), {summary['parameters']:,} "
+                  f"parameters, float16 weights, {ckpt.stat().st_size / 1e6:.2f} MB"),
+        ("inputs", "the handle the shipped Faster R-CNN finds in the first RGB-D image (back-projected with depth), "
+                   "the instruction's one-hot code, the hand's own state and touch"
+                   + (f", and the instructed front watched in a new depth image every {watch} control steps "
+                      f"(`--watch {watch}`)" if watch else "") + "; never ground truth"),
+    ]
+    if rounds and final:
+        rows.append(("demonstrations", f"generated cabinets only, train split (`opend demos --hand {hand} --split "
+                                       f"train --seeds 2 --solver oracle`): {final.get('demos')} successful, "
+                                       f"{rounds[0]['demos']} of them on the cabinets not kept for validation"))
+    if rounds:
+        val = dagger.get("validation", {})
+        figures = ", ".join(f"round {r['round']} **{r['val_success']} %**" for r in rounds)
+        kinds = " / ".join(f"{r.get('val_door', '-')}" for r in rounds)
+        drawers = " / ".join(f"{r.get('val_drawer', '-')}" for r in rounds)
+        extras = []
+        for r in rounds[1:]:
+            made = [f"beta {r['beta']:g}", f"seed {r['rollout_seed']}"]
+            if r.get("revisit"):
+                made.append(f"{r['revisited']} revisits")
+            if r.get("hold"):
+                made.append("hold after the plan")
+            extras.append(f"{r['round']}: " + ", ".join(made))
+        rows.append(("DAgger", f"{len(rounds) - 1} rounds after round 0, each from the previous round's weights "
+                               f"({'; '.join(extras)}). Validation ({val.get('cabinets', '?')} training cabinets kept "
+                               f"apart, {rounds[0]['val_episodes']} targets, episode seed {val.get('seed', 100)}): "
+                               f"{figures} (doors {kinds} %, drawers {drawers} %; `docs/dagger.png`)"))
+        cost = (f"round 0 training {_seconds(rounds[:1], 'training')}; later rounds: rollouts "
+                f"{_seconds(rounds[1:], 'rollouts')}, training {_seconds(rounds[1:], 'training')}, validation "
+                f"{_seconds(rounds, 'validation')}")
+        rows.append(("cost on 2 cores", cost + " (wall seconds of the run that made each round; a resumed "
+                                               "round counts only what that run did)"))
+    if final:
+        rows.append(("final policy", f"every training cabinet ({final.get('demos')} demonstrations + "
+                                     f"{final.get('rollouts')} labelled rollouts, {summary['samples']:,} samples), "
+                                     f"from round {final.get('from_round')}'s weights, {final.get('steps')} steps "
+                                     f"(batch {config['batch_size']}, AdamW lr {config['lr']:g}, seed "
+                                     f"{config['seed']}, torch threads {summary.get('threads', 1)}): "
+                                     f"{summary['seconds']:.0f} s"))
+    rows.append(("stop", f"{summary['stop_time']:.1f} s of simulated time (95th percentile of the training "
+                         "episodes' lengths)"))
+    test = _test_cells(root / "results" / "bc" / f"{hand}_shipped_test.jsonl")
+    if test:
+        rows.append(("test, generated cabinets", f"`opend run --policy bc --hand {hand} --split test --out "
+                     f"results/bc/{hand}_shipped_test.jsonl`: **{_rate(test['ok']['all'], test['n']['all'])}**, "
+                     f"drawers {test['ok']['drawer']}/{test['n']['drawer']}, doors {test['ok']['door']}/"
+                     f"{test['n']['door']}; {test['range75']}/{test['n']['all']} at >= 75 % of the joint range"))
+    real_path = root / "results" / "real" / f"bc_{hand}_all.json"
+    if real_path.is_file():
+        real = json.loads(real_path.read_text())
+        cell = next(iter(real["scores"].values()))[hand]
+        o, dr, do = cell["overall"], cell.get("drawer", {}), cell.get("door", {})
+        rows.append(("real cabinets", f"all {real['targets']} targets of the {real['cabinets']} real OpenD training "
+                     f"cabinets (`build/opend-train`, seed 0, Faster R-CNN; the {real.get('excluded_targets', 0)} "
+                     f"targets the build excludes counted as failures): `opend run --policy bc --hand {hand} --split "
+                     f"all --cabinets build/opend-train --workers 2 --out build/real-results/bc_{hand}_real.jsonl`: "
+                     f"**{_rate(o['open20'], o['episodes'])}**, drawers {dr.get('open20')}/{dr.get('episodes')}, "
+                     f"doors {do.get('open20')}/{do.get('episodes')}; {o['range75']}/{o['episodes']} at >= 75 % "
+                     f"of the joint range. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
+    intro = textwrap.fill(
+             f"`opend run --policy bc --hand {hand}` loads this checkpoint (`opend_mj.policy.bc_agent.BCAgent`). "
+             f"It is one model, made by the recipe every hand shares: `make train-bc HAND={hand}` "
+             "(docs/demonstrations.md, \"The planner as an interactive expert, and DAgger\"), trained on generated "
+             f"cabinets only. `bc_{hand}.json` holds its training summary, loss history and DAgger rounds; each "
+             f"round's policy and figures are kept in `bc_rounds/{hand}/`, from which a later run continues. "
+             f"Written by `python tools/bc_model_card.py --hand {hand}` from those files and the results.", 110)
+    lines = [title, "", intro, "", "| | |", "|---|---|"]
+    lines += [f"| {k} | {v} |" for k, v in rows]
+    lines += ["", textwrap.fill("Limits: validation on a few dozen targets (one episode moves a rate by about 2 "
+                                "points); one seed; real cabinets are never trained on. Where failures end, per "
+                                "kind: docs/results.md.", 110)]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hand", dest="hands", action="append", help="hand (repeatable) [every shipped one]")
+    args = parser.parse_args(argv)
+    hands = args.hands or sorted(p.stem[3:] for p in (ROOT / "checkpoints").glob("bc_*.pt"))
+    for hand in hands:
+        out = ROOT / "checkpoints" / f"bc_{hand}.md"
+        out.write_text(model_card(hand))
+        print(f"{hand} -> {out.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
