@@ -53,8 +53,11 @@ def model_card(hand: str, root: Path = ROOT) -> str:
     summary = json.loads((root / "checkpoints" / f"bc_{hand}.json").read_text())
     ckpt = root / "checkpoints" / f"bc_{hand}.pt"
     config, dagger = summary["config"], summary.get("dagger") or {}
-    rounds = _kept_rounds(root / "checkpoints" / "bc_rounds" / hand)
+    kept = _kept_rounds(root / "checkpoints" / "bc_rounds" / hand)
     final = dagger.get("final", {})
+    # the rounds of the run that made this policy; rounds kept since (a longer run not shipped) apart
+    made = int(final.get("rounds", dagger.get("config", {}).get("rounds", len(kept))))
+    rounds, later = [r for r in kept if r["round"] <= made], [r for r in kept if r["round"] > made]
     watch = int(config.get("watch") or 0)
     from opend_mj.evaluation.report import hand_title
 
@@ -90,6 +93,10 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                                f"({'; '.join(extras)}). Validation ({val.get('cabinets', '?')} training cabinets kept "
                                f"apart, {rounds[0]['val_episodes']} targets, episode seed {val.get('seed', 100)}): "
                                f"{figures} (doors {kinds} %, drawers {drawers} %; `docs/dagger.png`)"))
+        if later:
+            rows.append(("later rounds, not in this policy", "kept by a longer run whose final policy was not "
+                         "shipped: " + ", ".join(f"round {r['round']} {r['val_success']} % (doors {r.get('val_door')} "
+                                                 f"%)" for r in later)))
         cost = (f"round 0 training {_seconds(rounds[:1], 'training')}; later rounds: rollouts "
                 f"{_seconds(rounds[1:], 'rollouts')}, training {_seconds(rounds[1:], 'training')}, validation "
                 f"{_seconds(rounds, 'validation')}")
