@@ -24,20 +24,22 @@ def _rate(k: int, n: int) -> str:
     return f"{100.0 * k / max(1, n):.1f} % ({k}/{n})"
 
 
-def _kept_rounds(folder: Path) -> list[dict]:
-    rounds = [json.loads(p.read_text()) for p in folder.glob("round_*.json") if not p.name.endswith(".train.json")]
-    return sorted(rounds, key=lambda r: r["round"])
-
-
 def _test_cells(path: Path) -> dict | None:
-    """Successes (open ratio > 20 %) on the generated test split, by kind, and at >= 75 % of the range."""
+    """`report.summarize`'s cells (overall, drawer, door) of the shipped policy's generated test record."""
+    from opend_mj.evaluation.report import summarize
+    from opend_mj.evaluation.scoring import load_records
+
     if not path.is_file():
         return None
-    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    cells = {"all": records, **{k: [r for r in records if r.get("target_type") == k] for k in ("drawer", "door")}}
-    return {"n": {k: len(v) for k, v in cells.items()},
-            "ok": {k: sum(bool(r.get("success")) for r in v) for k, v in cells.items()},
-            "range75": sum(float(r.get("range_ratio") or 0.0) >= 0.75 for r in records)}
+    hands = next(iter(summarize(load_records([path])).values()))
+    return next(iter(hands.values()))
+
+
+def _cells_text(cell: dict) -> str:
+    """Success overall (bold), per kind, and at >= 75 % of the joint range, of `report.summarize`'s cells."""
+    o, dr, do = cell["overall"], cell.get("drawer", {}), cell.get("door", {})
+    return (f"**{_rate(o['open20'], o['episodes'])}**, drawers {dr.get('open20')}/{dr.get('episodes')}, doors "
+            f"{do.get('open20')}/{do.get('episodes')}; {o['range75']}/{o['episodes']} at >= 75 % of the joint range")
 
 
 def _seconds(rounds: list[dict], stage: str) -> str:
@@ -53,7 +55,9 @@ def model_card(hand: str, root: Path = ROOT) -> str:
     summary = json.loads((root / "checkpoints" / f"bc_{hand}.json").read_text())
     ckpt = root / "checkpoints" / f"bc_{hand}.pt"
     config, dagger = summary["config"], summary.get("dagger") or {}
-    kept = _kept_rounds(root / "checkpoints" / "bc_rounds" / hand)
+    from opend_mj.apps.dagger import kept_rounds
+
+    kept = kept_rounds(root / "checkpoints" / "bc_rounds" / hand)
     final = dagger.get("final", {})
     # the rounds of the run that made this policy; rounds kept since (a longer run not shipped) apart
     made = int(final.get("rounds", dagger.get("config", {}).get("rounds", len(kept))))
@@ -114,21 +118,16 @@ def model_card(hand: str, root: Path = ROOT) -> str:
     test = _test_cells(root / "results" / "bc" / f"{hand}_shipped_test.jsonl")
     if test:
         rows.append(("test, generated cabinets", f"`opend run --policy bc --hand {hand} --split test --out "
-                     f"results/bc/{hand}_shipped_test.jsonl`: **{_rate(test['ok']['all'], test['n']['all'])}**, "
-                     f"drawers {test['ok']['drawer']}/{test['n']['drawer']}, doors {test['ok']['door']}/"
-                     f"{test['n']['door']}; {test['range75']}/{test['n']['all']} at >= 75 % of the joint range"))
+                     f"results/bc/{hand}_shipped_test.jsonl`: {_cells_text(test)}"))
     real_path = root / "results" / "real" / f"bc_{hand}_all.json"
     if real_path.is_file():
         real = json.loads(real_path.read_text())
         cell = next(iter(real["scores"].values()))[hand]
-        o, dr, do = cell["overall"], cell.get("drawer", {}), cell.get("door", {})
         rows.append(("real cabinets", f"all {real['targets']} targets of the {real['cabinets']} real OpenD training "
                      f"cabinets (`build/opend-train`, seed 0, Faster R-CNN; the {real.get('excluded_targets', 0)} "
                      f"targets the build excludes counted as failures): `opend run --policy bc --hand {hand} --split "
                      f"all --cabinets build/opend-train --workers 2 --out build/real-results/bc_{hand}_real.jsonl`: "
-                     f"**{_rate(o['open20'], o['episodes'])}**, drawers {dr.get('open20')}/{dr.get('episodes')}, "
-                     f"doors {do.get('open20')}/{do.get('episodes')}; {o['range75']}/{o['episodes']} at >= 75 % "
-                     f"of the joint range. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
+                     f"{_cells_text(cell)}. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
     intro = textwrap.fill(
              f"`opend run --policy bc --hand {hand}` loads this checkpoint (`opend_mj.policy.bc_agent.BCAgent`). "
              f"It is one model, made by the recipe every hand shares: `make train-bc HAND={hand}` "

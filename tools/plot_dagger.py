@@ -17,12 +17,6 @@ import json
 from pathlib import Path
 
 
-def kept_rounds(folder: Path) -> list[dict]:
-    """The figures of every kept round in ``folder``, by round."""
-    rounds = [json.loads(p.read_text()) for p in folder.glob("round_*.json") if not p.name.endswith(".train.json")]
-    return sorted(rounds, key=lambda r: r["round"])
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=Path, default=Path("checkpoints/bc_rounds"),
@@ -33,6 +27,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     import matplotlib
+
+    from opend_mj.apps.dagger import kept_rounds
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

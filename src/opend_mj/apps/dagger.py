@@ -226,6 +226,12 @@ def rollout_episode(job, env, config) -> tuple[dict, object]:
     return line, demo
 
 
+def kept_rounds(keep: Path) -> list[dict]:
+    """The figures of every round kept in ``keep`` (``round_<i>.json``, as `run_dagger` writes them), by round."""
+    rounds = [json.loads(p.read_text()) for p in Path(keep).glob("round_*.json") if not p.name.endswith(".train.json")]
+    return sorted(rounds, key=lambda r: r["round"])
+
+
 def failed_targets(log: Path) -> set[tuple[str, str]]:
     """(cabinet, joint) of the rollouts in a round's episode log (`planner_demos.log_path`) that did
     not open their part."""
@@ -420,5 +426,5 @@ def save_half(src: Path, dst: Path) -> None:
     tmp.replace(dst)
 
 
-__all__ = ["DaggerConfig", "Rollout", "best_round", "failed_targets", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
+__all__ = ["DaggerConfig", "Rollout", "best_round", "failed_targets", "kept_rounds", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
            "validation_figures"]
