@@ -360,7 +360,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                 data_files.append(extra)
                 revisited += len(again)
         if kept:
-            entry = json.loads(figures.read_text())
+            entry = made
             log(f"round {round_}: kept ({ckpt}): validation {entry['val_success']} %")
         else:
             labelled = rollouts_of(data_files)
