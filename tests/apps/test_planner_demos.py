@@ -106,6 +106,28 @@ def test_replaying_a_demo_reproduces_its_open_ratio(demos_file):
     assert result.exit_code == 0 and "OK" in result.output, result.output
 
 
+def test_demos_under_hand_start_approach_from_farther_out_and_open(small_dataset, tmp_path):
+    """`opend demos --perturb hand_start=strong`: training data whose approaches start back, out and up
+    or down from the benchmark's start (the scene's own draw); the planner still opens the part from
+    there. A bad axis is refused before any episode runs."""
+    from opend_mj.apps.demos import read_demos
+
+    out = tmp_path / "start.hdf5"
+    args = ["demos", "--cabinets", str(small_dataset), "--split", "all", "--hand", "franka", "--limit", "1",
+            "--out", str(out), "--no-progress"]
+    res = CliRunner().invoke(main, args + ["--perturb", "hand_start=strong"])
+    assert res.exit_code == 0, res.output
+    nominal = tmp_path / "nominal.hdf5"
+    assert CliRunner().invoke(main, args[:-3] + ["--out", str(nominal), "--no-progress"]).exit_code == 0
+    (moved,), (plain,) = read_demos(out)[1], read_demos(nominal)[1]
+    assert moved.attrs["success"] and plain.attrs["success"] and moved.attrs["open_ratio"] > 0.2
+    assert "hand_start=strong" in moved.attrs["job_key"] and "hand_start" not in plain.attrs["job_key"]
+    start, start0 = moved.obs["mocap_pos"][0], plain.obs["mocap_pos"][0]
+    assert np.linalg.norm(start - start0) > 0.01 and start[1] >= start0[1]
+    bad = CliRunner().invoke(main, args[:-3] + ["--out", str(tmp_path / "bad.hdf5"), "--perturb", "fog=mild"])
+    assert bad.exit_code == 2 and "fog" in bad.output and not (tmp_path / "bad.hdf5").exists()
+
+
 def test_demos_resume_and_refuse_bad_output(demos_file, tmp_path):
     out, args = demos_file
     again = CliRunner().invoke(main, args)

@@ -126,6 +126,15 @@ def test_each_axis_changes_the_scene(proc_cabinets):
     env.task.shift.apply_model(env.physics, env.task.cabinet, env.task._handle_geoms)  # again: no compounding
     assert np.isclose(m1.body_mass[body], m0.body_mass[body] * f["mass"])
 
+    env = _env(cab, "hand_start=strong")  # the hand root starts back, out and up or down, still out of view
+    moved = env.task.start_pose[0] - nominal.task.start_pose[0]
+    back, out, up = env.task.shift["hand_start"]
+    assert np.any(moved != 0) and np.isclose(moved[0], back) and -0.15 <= back <= 0
+    assert moved[1] >= out - 1e-9 and abs(moved[2]) <= 0.25 + 1e-9
+    assert np.allclose(env.physics.data.mocap_pos[0], env.task.start_pose[0])
+    u, _ = env.task.camera_view(env.physics).project(env.task.start_pose[0][None])[0]
+    assert u < 0  # beside the image, as the nominal start
+
 
 def test_depth_noise_and_instruction(proc_cabinets):
     from opend_mj.evaluation.episode import EpisodeJob

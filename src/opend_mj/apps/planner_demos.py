@@ -462,13 +462,14 @@ def load_training_demos(paths, max_demos: int | None = None, successes_only: boo
 
 
 def demo_jobs(cabinets_dir, hands, solver: str = "oracle", split: str = "train", seeds=(0,), limit=None,
-              cabinet_ids=None, pull: str = "arc") -> list[EpisodeJob]:
-    """The episodes of a recording: `opend run`'s jobs for every seed."""
+              cabinet_ids=None, pull: str = "arc", perturb: str | None = None) -> list[EpisodeJob]:
+    """The episodes of a recording: `opend run`'s jobs for every seed (under the canonical
+    perturbation ``perturb``, `sim.perturb.parse_perturb`; None: the nominal scenes)."""
     from opend_mj.evaluation.jobs import make_jobs
 
     return [job for seed in dict.fromkeys(seeds)
             for job in make_jobs(cabinets_dir, hands, solver, split=split, seed=seed, limit=limit,
-                                 cabinet_ids=cabinet_ids, pull=pull)]
+                                 cabinet_ids=cabinet_ids, pull=pull, perturb=perturb)]
 
 
 __all__ = ["ActionNoise", "DEMO_OBS_KEYS", "NoiseProcess", "RecordConfig", "TRAINING_KEYS", "demo_jobs",

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from opend_mj.commands.evaluate import _check_cabinets, _check_hands, _check_solver
+from opend_mj.commands.evaluate import _check_cabinets, _check_hands, _check_perturb, _check_scenes, _check_solver
 from opend_mj.language import TARGET_KINDS
 
 
@@ -36,20 +36,26 @@ from opend_mj.language import TARGET_KINDS
               help="DART: spread of the finger targets' offsets (fraction of each actuator range).")
 @click.option("--noise-tau", type=click.FloatRange(min=0, min_open=True), default=0.3, show_default=True,
               help="DART: correlation time (s) of the offsets.")
+@click.option("--perturb", "perturb", multiple=True, metavar="AXIS=LEVEL",
+              help="Record under a perturbation, as `opend run --perturb` runs (repeatable); e.g. "
+                   "hand_start=strong: approaches from starts farther out, for training data.")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes (spawned).")
 @click.option("--progress/--no-progress", default=True)
 def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, image_size, keep_failures, noise_pos,
-          noise_rot, noise_fingers, noise_tau, workers, progress):
+          noise_rot, noise_fingers, noise_tau, perturb, workers, progress):
     """Record the planner's episodes as demonstrations (agent observations and actions at 60 Hz)."""
     from opend_mj.apps.planner_demos import ActionNoise, RecordConfig, demo_jobs, log_path, record_demos
 
     if out.suffix.lower() not in (".hdf5", ".h5"):
         raise click.BadParameter(f"{out}: demonstrations are written as HDF5 (.hdf5 or .h5)", param_hint="--out")
+    perturb = _check_perturb(perturb)  # refused (exit status 2) before any episode runs
     jobs = demo_jobs(cabinets_dir, hands, solver, split=split, seeds=range(seeds), limit=limit,
-                     cabinet_ids=list(cabinet_ids) or None)
+                     cabinet_ids=list(cabinet_ids) or None, perturb=perturb)
     if not jobs:
         raise click.ClickException(f"no episodes: split {split!r} of {cabinets_dir} has no targets")
+    if perturb is not None:
+        _check_scenes(jobs)
     noise = ActionNoise(pos=noise_pos, rot=noise_rot, fingers=noise_fingers, tau=noise_tau)
     config = RecordConfig(image_size=image_size, keep_failures=keep_failures, noise=noise)
     from opend_mj.apps.demos import DemoFileError

@@ -1,9 +1,10 @@
 """Perturbations of an episode: the shifts a deployment meets (camera, light, textures, distractors,
-physics, depth sensor, instruction), each at a ``mild`` and a ``strong`` level (`opend run --perturb`).
+physics, depth sensor, instruction, the hand's start), each at a ``mild`` and a ``strong`` level
+(`opend run --perturb`).
 
 An axis is one object (`Axis`): its name, the numbers of its two levels, its draw for one scene and
-where that draw applies (the camera's pose, the scene's MJCF before it compiles, the compiled model,
-the depth sensor, the instruction). `AXIS_LIST` lists them; `PerturbConfig` holds them and the checks
+where that draw applies (the camera's pose, the hand's start, the scene's MJCF before it compiles,
+the compiled model, the depth sensor, the instruction). `AXIS_LIST` lists them; `PerturbConfig` holds them and the checks
 that keep a perturbed scene valid (documented in docs/robustness.md). A perturbation is written
 ``AXIS=LEVEL`` (several joined by commas, e.g. ``camera_pose=mild,light=strong``); `parse_perturb`
 checks and canonicalises it. `SceneShift.draw` is the one place where axes are drawn: from the
@@ -65,6 +66,10 @@ class Axis:
     def move_camera(self, value, pose):
         """The front camera's pose (`sim.camera.CameraPose`) under the draw."""
         return pose
+
+    def move_start(self, value, offset: np.ndarray) -> np.ndarray:
+        """The offset (world, m) of the hand root's start from the task's nominal start under the draw."""
+        return offset
 
     def apply_mjcf(self, value, arena, cabinet, handle_geoms) -> None:
         """The draw into the scene's MJCF, before it compiles."""
@@ -336,9 +341,30 @@ class InstructionAxis(Axis):
         return rewordings(description, n=1, seed=int(rng.integers(2**31)))[0]
 
 
+# ------------------------------------------------------------------------------------ hand start
+@dataclass(frozen=True)
+class HandStartAxis(Axis):
+    """The hand root starts elsewhere (a robot placed another way): up to ``back`` m further from the
+    cabinet's front (-x), up to ``out`` m further out beside it (+y, away from the camera's view) and
+    up or down by up to ``up`` m, each uniform: (back, out, up) per level. The start's height stays
+    within `sim.task.START_HEIGHT`. Its strong level also serves as training data that covers the
+    far approaches of wide cabinets (`opend demos --perturb hand_start=strong`)."""
+
+    name: ClassVar[str] = "hand_start"
+    mild: tuple[float, float, float] = (0.05, 0.15, 0.10)
+    strong: tuple[float, float, float] = (0.15, 0.60, 0.25)
+
+    def draw(self, rng, level, scene) -> tuple[float, float, float]:
+        back, out, up = level
+        return (-float(rng.uniform(0, back)), float(rng.uniform(0, out)), float(rng.uniform(-up, up)))
+
+    def move_start(self, value, offset: np.ndarray) -> np.ndarray:
+        return np.asarray(offset, float) + np.asarray(value, float)
+
+
 #: Every axis, in the order of their random streams (append a new one at the end).
 AXIS_LIST: tuple[Axis, ...] = (CameraPoseAxis(), CameraFovAxis(), LightAxis(), TextureAxis(), DistractorsAxis(),
-                               PhysicsAxis(), DepthNoiseAxis(), InstructionAxis())
+                               PhysicsAxis(), DepthNoiseAxis(), InstructionAxis(), HandStartAxis())
 AXES = tuple(a.name for a in AXIS_LIST)
 
 
@@ -479,6 +505,13 @@ class SceneShift:
         for axis, value in self._drawn():
             pose = axis.move_camera(value, pose)
         return pose
+
+    def start_offset(self) -> np.ndarray:
+        """The offset (world, m) of the hand root's start from the nominal start (zeros: none)."""
+        offset = np.zeros(3)
+        for axis, value in self._drawn():
+            offset = axis.move_start(value, offset)
+        return offset
 
     def apply_mjcf(self, arena, cabinet, handle_geoms) -> None:
         """Light, textures and distractors into the scene's MJCF (before it compiles)."""

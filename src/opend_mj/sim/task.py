@@ -430,7 +430,8 @@ class OpenCabinetTask(composer.Task):
         """Between camera and cabinet, beside the cabinet and out of the camera's view."""
         quat = orientation_for_handle("horizontal")
         view = camera_view(physics, self.camera.full_identifier, self.config.image_size, self.config.image_size)
-        return start_position(self.cabinet.bounds, view, self.config.image_size), np.asarray(quat, float)
+        return (start_position(self.cabinet.bounds, view, self.config.image_size, self.shift.start_offset()),
+                np.asarray(quat, float))
 
     def open_ratio(self, physics) -> float:
         """The instructed target's open ratio (what the success checker compares to the threshold)."""
@@ -471,13 +472,21 @@ class OpenCabinetTask(composer.Task):
         return {t.joint: box_in_image(self.handle_corners(physics, t), view) for t in self.cabinet.targets}
 
 
-def start_position(bounds, view, image_size: int) -> np.ndarray:
+#: The hand root's start height (world z, m) stays within this range, whatever its offset.
+START_HEIGHT = (0.25, 1.45)
+
+
+def start_position(bounds, view, image_size: int, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
     """The hand root's start (world, m): between camera and cabinet, beside the cabinet's +y side and
-    out of the camera's view (``view``: a `sim.camera.CameraView`)."""
+    out of the camera's view (``view``: a `sim.camera.CameraView`); ``offset`` (m; the hand_start
+    perturbation's, `sim.perturb.HandStartAxis`) moves it back, out and up before it is pushed out
+    of view."""
     lo, hi = (np.asarray(b, float) for b in bounds)
-    x = lo[0] - 0.35
+    dx, dy, dz = (float(v) for v in offset)
+    x = lo[0] - 0.35 + dx
     z = float(np.clip((lo[2] + hi[2]) / 2, 0.3, 1.2))
-    y = hi[1] + 0.25
+    z = float(np.clip(z + dz, *START_HEIGHT)) if dz else z
+    y = hi[1] + 0.25 + dy
     for _ in range(40):
         u, _v = view.project(np.array([[x, y, z]]))[0]
         if not np.isfinite(u) or u < -0.25 * image_size:
@@ -496,7 +505,7 @@ def scene_geometry(bounds, config: TaskConfig, shift: SceneShift):
     size = config.image_size
     view = CameraView(CameraIntrinsics.from_fovy(pose.fovy, size, size), np.asarray(pose.pos, float),
                       np.asarray(pose.rot, float))
-    return pose, start_position(bounds, view, size)
+    return pose, start_position(bounds, view, size, shift.start_offset())
 
 
 def make_environment(episode: EpisodeSpec, config: TaskConfig = TaskConfig(), strip_singleton=True,
