@@ -445,3 +445,33 @@ def test_cli_generate(tmp_path):
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in (tmp_path / "src").iterdir()) == ["proc_0000", "proc_0001"]
     assert _tree_bytes(tmp_path / "src" / "proc_0001") == _tree_bytes(generate_source(1, 5, tmp_path / "x"))
+
+
+def test_cli_generate_families_make_long_doors_and_refuse_unknown_ones(tmp_path):
+    """`opend generate --family long_door`: describable wide, low cabinets, each with one door across
+    its whole width (0.95-1.2 m; the real ones reach 1.25 m; side-hinged, or a flap as often as
+    other low doors are), as extra training cabinets; the default mix is unchanged, and an unknown
+    family or a bad weight is refused."""
+    from click.testing import CliRunner
+
+    from opend_mj.commands.assets import generate
+
+    out = tmp_path / "long"
+    result = CliRunner().invoke(generate, ["--count", "4", "--start", "2000", "--family", "long_door",
+                                           "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    for path in sorted(out.iterdir()):
+        meta = _meta(path)["procedural"]
+        assert meta["layout"].startswith("long_door") and meta["describable"]
+        (door,) = meta["targets"]
+        assert door["type"] == "door" and door["hinge"] in ("left", "right", "top", "bottom")
+        assert 0.95 <= meta["size_m"]["width"] <= 1.2 and meta["size_m"]["height"] <= 0.9
+        (_, obj, _), = [v for v in _links(path)[door["link"]]["visuals"] if v[0].startswith("cabinet_door")]
+        v, _ = _obj_vertices_faces(obj)
+        assert np.ptp(v[:, 0]) * S > meta["size_m"]["width"] - 0.1  # the door spans the cabinet
+    plain = tmp_path / "plain"
+    assert CliRunner().invoke(generate, ["--count", "1", "--start", "3", "--out", str(plain)]).exit_code == 0
+    assert _tree_bytes(plain / "proc_0003") == _tree_bytes(generate_source(3, 0, tmp_path / "x"))
+    for bad, says in (("hallway", "unknown layout families"), ("long_door=-1", "positive")):
+        res = CliRunner().invoke(generate, ["--count", "1", "--family", bad, "--out", str(tmp_path / "bad")])
+        assert res.exit_code == 2 and says in res.output

@@ -103,6 +103,18 @@ def sample_layout(rng: np.random.Generator, cfg: GeneratorConfig, t: float, plin
     def double_door():
         return Layout("double_door", u(0.6, 1.2), u(0.4, 1.8), d, Leaf("double_door"), True)
 
+    def long_door():
+        """A wide, low cabinet with one side-hinged door across its whole width, under an open shelf
+        half of the time: the TV and sideboard cabinets of the real OpenD training set (18 of their 126
+        side-hinged doors are 0.95-1.25 m wide and 0.35-0.67 m tall, the only door of their cabinet).
+        Not among the default families (`GeneratorConfig.valid_layouts`): `opend generate --family`."""
+        hinge = "left" if rng.random() < cfg.left_hinge_share else "right"
+        w = u(0.95, 1.2)
+        if rng.random() < 0.5:
+            return Layout("long_door_under_shelf", w, u(0.6, 0.9), d,
+                          _rows((u(0.4, 0.8), Leaf("open")), (1.0, Leaf("door", hinge))), True)
+        return Layout("long_door", w, u(0.4, 0.7), d, Leaf("door", hinge), True)
+
     def drawers_over_doors():
         w = u(0.45, 1.2)
         double = w > 0.65
@@ -169,7 +181,8 @@ def sample_layout(rng: np.random.Generator, cfg: GeneratorConfig, t: float, plin
 
     families: dict[str, Callable[[], Layout]] = {
         "single_drawer": single_drawer, "drawer_stack": drawer_stack, "drawer_grid": drawer_grid,
-        "single_door": single_door, "double_door": double_door, "drawers_over_doors": drawers_over_doors,
+        "single_door": single_door, "double_door": double_door, "long_door": long_door,
+        "drawers_over_doors": drawers_over_doors,
         "door_beside_drawers": door_beside_drawers, "wardrobe": wardrobe, "double_door_rows": double_door_rows,
         "stacked_doors": stacked_doors, "tall_drawer_stack": tall_drawer_stack, "drawer_row": drawer_row,
         "stack_beside_door": stack_beside_door,
