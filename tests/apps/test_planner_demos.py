@@ -441,11 +441,27 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     assert outcomes((folder / "round_1.hdf5.episodes.jsonl").read_text()) == outcomes(log)
 
 
-def test_dagger_revisits_the_targets_its_rollouts_failed(demos_file, small_dataset, tmp_path):
+@pytest.fixture(scope="module")
+def long_door_dataset(tmp_path_factory):
+    """One compiled cabinet of the long_door family (`opend generate --family`), id proc_2000."""
+    from opend_mj.assets.dataset import build_dataset
+    from opend_mj.commands.assets import generate
+
+    root = tmp_path_factory.mktemp("long")
+    res = CliRunner().invoke(generate, ["--count", "1", "--start", "2000", "--family", "long_door",
+                                        "--out", str(root / "src")])
+    assert res.exit_code == 0, res.output
+    build_dataset(sorted((root / "src").iterdir()), root / "cabinets", workers=1, progress=False,
+                  log=lambda *a: None)
+    return root / "cabinets"
+
+
+def test_dagger_revisits_the_targets_its_rollouts_failed(demos_file, small_dataset, long_door_dataset, tmp_path):
     """`--revisit 1`: after a round's rollouts, the training targets whose rollout did not open their
     part are rolled out once more at an episode seed of their own, by the same policy, and labelled by
-    the expert; the round trains on both and says how many it revisited. A later run with another
-    --revisit makes a kept round's rollouts again as that round made them."""
+    the expert; the round trains on both and says how many it revisited. `--extra-cabinets`: every
+    target of another dataset is rolled out too (validation stays on --cabinets). A later run with
+    another --revisit makes a kept round's rollouts again as that round made them."""
     from opend_mj.apps.dagger import DaggerConfig, failed_targets
     from opend_mj.apps.demos import read_demos
 
@@ -454,12 +470,17 @@ def test_dagger_revisits_the_targets_its_rollouts_failed(demos_file, small_datas
     args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "5",
             "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
             str(folder), "--keep-rounds", str(keep), "--dagger-targets", "2", "--val-targets", "1",
-            "--final-steps", "5", "--revisit", "1", "--no-progress"]
+            "--final-steps", "5", "--revisit", "1", "--extra-cabinets", str(long_door_dataset), "--no-progress"]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     failed = failed_targets(folder / "round_1.hdf5.episodes.jsonl")
     entry = json.loads((keep / "round_1.json").read_text())
     assert entry["revisit"] == 1 and entry["revisited"] == len(failed)
+    assert entry["extra_cabinets"] == [str(long_door_dataset)]
+    rolled = [json.loads(x) for x in (folder / "round_1.hdf5.episodes.jsonl").read_text().splitlines()]
+    assert len(rolled) == 3 and sum(r["cabinet"] == "proc_2000" for r in rolled) == 1
+    validated = [json.loads(x)["cabinet"] for x in (folder / "val_1.jsonl").read_text().splitlines()]
+    assert validated and "proc_2000" not in validated
     seed = DaggerConfig().revisit_seed(1, 0)
     assert seed not in (11, 100)
     extra = folder / "round_1_revisit_0.hdf5"

@@ -93,6 +93,10 @@ class DaggerConfig:
     #: (`Rollout.hold`): the policy acts to its stop time, past where demonstrations end, and learns
     #: to stay where the planner leaves the hand instead of wandering into the opened part.
     hold: bool = False
+    #: More compiled datasets whose every target (all splits) each round also rolls out, e.g. extra
+    #: training cabinets from `opend generate --family` (their demonstrations come in ``demo_files``);
+    #: validation stays on the main dataset's held-out training cabinets.
+    extra_cabinets: tuple[str, ...] = ()
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -333,6 +337,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         made = json.loads(figures.read_text()) if kept else {}
         revisit = made.get("revisit", 0) if kept else config.revisit
         hold = made.get("hold", False) if kept else config.hold
+        extra_dirs = made.get("extra_cabinets", []) if kept else list(config.extra_cabinets)
         revisited = 0
         if round_ > 0:
             previous = keep / f"round_{round_ - 1}.pt"
@@ -340,6 +345,9 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                               beta=config.beta(round_), round=round_, hold=hold)
             jobs = make_jobs(cabinets_dir, [hand], "oracle", split="train", seed=config.rollout_seed + round_,
                              cabinet_ids=sorted(train_cabs))[:config.limit]
+            for more in extra_dirs:
+                jobs += make_jobs(Path(more), [hand], "oracle", split="all",
+                                  seed=config.rollout_seed + round_)[:config.limit]
             data = folder / f"round_{round_}.hdf5"
             log(f"round {round_}: rollouts of {previous.name} on {len(jobs)} targets (episode seed "
                 f"{config.rollout_seed + round_}), beta {rollout.beta:g}")
@@ -382,7 +390,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                      "samples": trained.get("samples"), "steps": steps, "init": str(init) if init else None,
                      "beta": config.beta(round_) if round_ else None,
                      "rollout_seed": config.rollout_seed + round_ if round_ else None,
-                     "revisit": revisit, "revisited": revisited, "hold": hold,
+                     "revisit": revisit, "revisited": revisited, "hold": hold, "extra_cabinets": extra_dirs,
                      **validation_figures(list(load_results(val_out))), "seconds": seconds}
             figures.write_text(json.dumps(entry, indent=1) + "\n")
             log(f"round {round_}: validation {entry['val_success']} % (drawers {entry['val_drawer']} %, doors "

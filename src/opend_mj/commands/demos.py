@@ -107,6 +107,10 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
                    "training split, labelled by the planner as an expert, and training again (docs/demonstrations.md).")
 @click.option("--cabinets", "cabinets_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=Path("cabinets"), show_default=True, help="DAgger: the cabinets whose training split is rolled out.")
+@click.option("--extra-cabinets", "extra_cabinets", multiple=True,
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="DAgger: more cabinets whose every target is rolled out too, e.g. a `opend generate --family` "
+                   "set (repeatable; validation stays on --cabinets).")
 @click.option("--dagger-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="DAgger: what can be made again: rollouts, validation episodes, working checkpoints "
                    "[build/dagger/<hand>].")
@@ -136,7 +140,8 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
 @click.option("--progress/--no-progress", default=True)
 def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk, d_model, grasp_token, watch, kind, seed,
                  init,
-                 warm_start, threads, device, dagger_rounds, cabinets_dir, dagger_dir, keep_rounds, beta0, beta_decay,
+                 warm_start, threads, device, dagger_rounds, cabinets_dir, extra_cabinets, dagger_dir, keep_rounds,
+                 beta0, beta_decay,
                  dagger_targets, final_steps, round_steps, revisit, hold_after_plan, val_targets, workers,
                  progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
@@ -160,7 +165,7 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
                               limit=dagger_targets, val_limit=val_targets, final_steps=final_steps,
                               warm_start=warm_start, init=init, round_steps=round_steps, revisit=revisit,
-                              hold=hold_after_plan)
+                              hold=hold_after_plan, extra_cabinets=tuple(str(d) for d in extra_cabinets))
         _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, keep_rounds, workers,
                            threads, progress)
         return
