@@ -125,6 +125,12 @@ ROUND_STEPS ?= 2000
 FINAL_STEPS ?= 6000
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
+## LONG_DOORS=N: N extra training cabinets of the long_door family (`opend generate --family long_door`,
+## built into LONG_DIR), their demonstrations, and their targets rolled out in every DAgger round
+## (`--extra-cabinets`); 0: none.
+LONG_DOORS ?= 0
+LONG_DIR ?= build/cabinets-long
+LONG_ARGS = $(if $(filter-out 0,$(LONG_DOORS)),--demos $(BC_DIR)/demos_long.hdf5 --extra-cabinets $(LONG_DIR))
 ## BC_THREADS: torch threads of training (both cores by default; 1 where another job shares them:
 ## more threads than free cores slow training many times over)
 BC_THREADS ?= $(WORKERS)
@@ -133,7 +139,14 @@ train-bc: install assets
 	@t=$$(date +%s); $(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) \
 		--solver oracle --workers $(WORKERS) --out $(BC_DIR)/demos.hdf5 && \
 		echo "train-bc: demonstrations $$(( $$(date +%s) - t )) s"
-	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 --hand $(HAND) --steps $(STEPS) \
+ifneq ($(LONG_DOORS),0)
+	@t=$$(date +%s); $(BIN)/opend generate --family long_door --start 2000 --count $(LONG_DOORS) \
+		--out $(LONG_DIR)-src && $(BIN)/opend build-assets --source $(LONG_DIR)-src --out $(LONG_DIR) \
+		--workers $(WORKERS) --no-progress && $(BIN)/opend demos --cabinets $(LONG_DIR) --hand $(HAND) --split all \
+		--seeds $(SEEDS) --solver oracle --workers $(WORKERS) --out $(BC_DIR)/demos_long.hdf5 && \
+		echo "train-bc: long-door cabinets and their demonstrations $$(( $$(date +%s) - t )) s"
+endif
+	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 $(LONG_ARGS) --hand $(HAND) --steps $(STEPS) \
 		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --revisit $(REVISIT) \
 		$(if $(filter 1,$(HOLD)),--hold-after-plan,--no-hold-after-plan) \
 		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
