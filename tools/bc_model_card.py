@@ -50,6 +50,28 @@ def _seconds(rounds: list[dict], stage: str) -> str:
     return f"{lo:.0f} s" if round(lo) == round(hi) else f"{lo:.0f}-{hi:.0f} s"
 
 
+def make_defaults(root: Path = ROOT) -> dict[str, str]:
+    """The Makefile's ``NAME ?= VALUE`` defaults (what a bare `make train-bc` uses)."""
+    out = {}
+    for line in (root / "Makefile").read_text().splitlines():
+        name, sep, value = line.partition("?=")
+        if sep and name.strip().isidentifier():
+            out[name.strip()] = value.strip()
+    return out
+
+
+def recipe_command(hand: str, rounds: list[dict], extra: list, root: Path = ROOT) -> str:
+    """The `make train-bc` command that makes a policy of ``rounds`` (kept round figures) and extra
+    training cabinets ``extra``: the Makefile's defaults, overridden where the policy's rounds differ."""
+    defaults = make_defaults(root)
+    later = rounds[1:] or [{}]
+    made = {"REVISIT": str(later[0].get("revisit", 0)), "HOLD": "1" if later[0].get("hold") else "0"}
+    args = [f"{k}={v}" for k, v in made.items() if defaults.get(k, v) != v]
+    if bool(extra) != (defaults.get("LONG_DOORS", "0") != "0"):
+        args.append("LONG_DOORS=0" if not extra else "LONG_DOORS=N")
+    return " ".join([f"make train-bc HAND={hand}", *args])
+
+
 def model_card(hand: str, root: Path = ROOT) -> str:
     """The card's markdown for ``hand``."""
     summary = json.loads((root / "checkpoints" / f"bc_{hand}.json").read_text())
@@ -76,9 +98,13 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                    + (f", and the instructed front watched in a new depth image every {watch} control steps "
                       f"(`--watch {watch}`)" if watch else "") + "; never ground truth"),
     ]
+    extra = dagger.get("config", {}).get("extra_cabinets") or []
     if rounds and final:
+        more = (f" and on every target of the extra training cabinets in {', '.join(f'`{d}`' for d in extra)} "
+                "(long doors: `opend generate --family long_door`, `make train-bc LONG_DOORS=N`), which every "
+                "DAgger round also rolls out" if extra else "")
         rows.append(("demonstrations", f"generated cabinets only, train split (`opend demos --hand {hand} --split "
-                                       f"train --seeds 2 --solver oracle`): {final.get('demos')} successful, "
+                                       f"train --seeds 2 --solver oracle`){more}: {final.get('demos')} successful, "
                                        f"{rounds[0]['demos']} of them on the cabinets not kept for validation"))
     if rounds:
         val = dagger.get("validation", {})
@@ -130,7 +156,7 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                      f"{_cells_text(cell)}. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
     intro = textwrap.fill(
              f"`opend run --policy bc --hand {hand}` loads this checkpoint (`opend_mj.policy.bc_agent.BCAgent`). "
-             f"It is one model, made by the recipe every hand shares: `make train-bc HAND={hand}` "
+             f"It is one model, made by the recipe every hand shares: `{recipe_command(hand, rounds, extra, root)}` "
              "(docs/demonstrations.md, \"The planner as an interactive expert, and DAgger\"), trained on generated "
              f"cabinets only. `bc_{hand}.json` holds its training summary, loss history and DAgger rounds; each "
              f"round's policy and figures are kept in `bc_rounds/{hand}/`, from which a later run continues. "
