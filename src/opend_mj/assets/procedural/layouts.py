@@ -37,6 +37,8 @@ class Layout:
     depth: float
     tree: Leaf | Split
     describable: bool
+    #: its low doors may be drawn as flaps (`GeneratorConfig.flap_share`); False: side-hinged always
+    flaps: bool = True
 
 
 def _rows(*children: tuple[float, Leaf | Split]) -> Split:
@@ -104,16 +106,17 @@ def sample_layout(rng: np.random.Generator, cfg: GeneratorConfig, t: float, plin
         return Layout("double_door", u(0.6, 1.2), u(0.4, 1.8), d, Leaf("double_door"), True)
 
     def long_door():
-        """A wide, low cabinet with one side-hinged door across its whole width, under an open shelf
-        half of the time: the TV and sideboard cabinets of the real OpenD training set (18 of their 126
-        side-hinged doors are 0.95-1.25 m wide and 0.35-0.67 m tall, the only door of their cabinet).
+        """A wide, low cabinet with one side-hinged door across its whole width (never a flap), under an
+        open shelf half of the time: the TV and sideboard cabinets of the real OpenD training set (18 of
+        their 126 side-hinged doors are 0.95-1.25 m wide and 0.35-0.67 m tall, the only door of their
+        cabinet; no real flap is that wide).
         Not among the default families (`GeneratorConfig.valid_layouts`): `opend generate --family`."""
         hinge = "left" if rng.random() < cfg.left_hinge_share else "right"
         w = u(0.95, 1.2)
         if rng.random() < 0.5:
             return Layout("long_door_under_shelf", w, u(0.6, 0.9), d,
-                          _rows((u(0.4, 0.8), Leaf("open")), (1.0, Leaf("door", hinge))), True)
-        return Layout("long_door", w, u(0.4, 0.7), d, Leaf("door", hinge), True)
+                          _rows((u(0.4, 0.8), Leaf("open")), (1.0, Leaf("door", hinge))), True, flaps=False)
+        return Layout("long_door", w, u(0.4, 0.7), d, Leaf("door", hinge), True, flaps=False)
 
     def drawers_over_doors():
         w = u(0.45, 1.2)

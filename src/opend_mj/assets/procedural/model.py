@@ -183,7 +183,7 @@ def build_parts(rng: np.random.Generator, cfg: GeneratorConfig, layout: Layout, 
             lo = np.array([lx0, front_y0, zf - t_front])
             hi = np.array([lx1, cy1 - g, zf])
             door_h = hi[1] - lo[1]
-            if flap is not None and door_h <= cfg.flap_max_height:
+            if flap is not None and layout.flaps and door_h <= cfg.flap_max_height:
                 targets.append(_flap(rng, cfg, lo, hi, flap if lo[1] > floor_y + 1e-9 else "top", flap_upper,
                                      door_style, door_bar_edge, bar_end_margin, hinge, leaf.kind == "double_door",
                                      lo[1] - floor_y, front, handle_mat))
