@@ -101,6 +101,22 @@ def shared_dir(tmp_path_factory, name: str):
 
 
 @pytest.fixture(scope="session")
+def load_tool():
+    """``load_tool(name)``: the module of the script ``tools/<name>.py`` (tools/ is not a package)."""
+    from importlib import util
+
+    tools = Path(__file__).resolve().parents[1] / "tools"
+
+    def load(name: str):
+        spec = util.spec_from_file_location(name, tools / f"{name}.py")
+        module = util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
+
+
+@pytest.fixture(scope="session")
 def compile_cache(tmp_path_factory) -> Path:
     """The compiler's decomposition cache (its files are written atomically, so processes share it)."""
     with shared_dir(tmp_path_factory, "compile_cache") as path:

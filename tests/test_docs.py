@@ -75,14 +75,10 @@ def test_no_user_page_is_over_300_lines():
     assert long == {}
 
 
-def test_the_shipped_policies_model_cards_are_current():
+def test_the_shipped_policies_model_cards_are_current(load_tool):
     """Each checkpoints/bc_<hand>.md is `python tools/bc_model_card.py`'s output for the shipped policy's
     summary, kept rounds and results as they are now: a retrained policy cannot ship with an old card."""
-    sys.path.insert(0, str(ROOT / "tools"))
-    try:
-        from bc_model_card import model_card
-    finally:
-        sys.path.remove(str(ROOT / "tools"))
+    model_card = load_tool("bc_model_card").model_card
     hands = sorted(p.stem[3:] for p in (ROOT / "checkpoints").glob("bc_*.pt"))
     assert hands, "no shipped behaviour-cloning checkpoint"
     stale = [h for h in hands if (ROOT / "checkpoints" / f"bc_{h}.md").read_text() != model_card(h)]

@@ -12,7 +12,6 @@ or more from the hinge) are where generated and real cabinets differ most (docs/
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
@@ -30,14 +29,16 @@ def part_class(target: dict, wide: float) -> str:
 
 
 def tally(records: Path, cabinets: Path | None, wide: float) -> dict[str, list[int]]:
-    """{class: [successes, episodes]} over the records of ``records``."""
+    """{class: [successes, episodes]} over the records of ``records`` (read, never repaired)."""
+    from opend_mj.evaluation.results import load_results
+    from opend_mj.sim.cabinet import load_cabinet_info
+
     counts = {c: [0, 0] for c in CLASSES}
     infos: dict[Path, dict] = {}
-    for line in records.read_text().splitlines():
-        r = json.loads(line)
+    for r in load_results(records, repair=False):
         folder = (cabinets / r["cabinet"]) if cabinets else Path(r["cabinet_dir"])
         if folder not in infos:
-            infos[folder] = json.loads((folder / "cabinet.json").read_text())
+            infos[folder] = load_cabinet_info(folder)
         target = next(t for t in infos[folder]["targets"] if t["joint"] == r["joint"])
         cell = counts[part_class(target, wide)]
         cell[0] += bool(r.get("success"))

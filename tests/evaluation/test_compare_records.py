@@ -2,18 +2,8 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "compare_records.py"
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location("compare_records", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _write(path: Path, records: list[dict]) -> Path:
@@ -29,8 +19,8 @@ def _record(**kw) -> dict:
     return rec
 
 
-def test_identical_but_for_wall_clock(tmp_path):
-    tool = _tool()
+def test_identical_but_for_wall_clock(tmp_path, load_tool):
+    tool = load_tool("compare_records")
     a = _write(tmp_path / "a.jsonl", [_record(), _record(joint="joint_1")])
     b = _write(tmp_path / "b.jsonl", [_record(joint="joint_1", wall_seconds=9.0), _record(wall_seconds=2.0)])
     bad, lines = tool.compare(a, b)
@@ -38,8 +28,8 @@ def test_identical_but_for_wall_clock(tmp_path):
     assert tool.main([str(a), str(b)]) == 0
 
 
-def test_a_changed_field_deep_in_a_record_is_reported(tmp_path):
-    tool = _tool()
+def test_a_changed_field_deep_in_a_record_is_reported(tmp_path, load_tool):
+    tool = load_tool("compare_records")
     a = _write(tmp_path / "a.jsonl", [_record(), _record(joint="joint_1")])
     b = _write(tmp_path / "b.jsonl", [_record(verify=[{"held": True, "touch": {"thumb": 3.3}}])])
     bad, lines = tool.compare(a, b)

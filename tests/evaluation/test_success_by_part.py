@@ -2,28 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "success_by_part.py"
-
-
-def _tool():
-    spec = importlib.util.spec_from_file_location("success_by_part", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _door(joint, axis, anchor, handle):
     return {"joint": joint, "type": "door", "axis": axis, "anchor": anchor, "handle": {"center": handle}}
 
 
-def test_parts_are_classed_by_hinge_axis_and_handle_to_hinge_distance(tmp_path, capsys):
+def test_parts_are_classed_by_hinge_axis_and_handle_to_hinge_distance(tmp_path, capsys, load_tool):
     """Drawers, flaps (horizontal hinge axis), doors, and wide doors (handle 0.5 m or more from the
     hinge line, measured across the floor); each records file's row counts successes per class."""
-    tool = _tool()
+    tool = load_tool("success_by_part")
     targets = [{"joint": "joint_0", "type": "drawer"},
                _door("joint_1", [0, 1, 0], [-0.2, 0.0, 0.1], [-0.2, 0.3, 0.4]),  # a flap
                _door("joint_2", [0, 0, 1], [-0.2, 0.5, 0.0], [-0.22, 0.1, 0.4]),  # 0.4 m: a door
@@ -34,7 +23,8 @@ def test_parts_are_classed_by_hinge_axis_and_handle_to_hinge_distance(tmp_path, 
     cab.mkdir(parents=True)
     (cab / "cabinet.json").write_text(json.dumps({"targets": targets}))
     records = tmp_path / "r.jsonl"
-    records.write_text("".join(json.dumps({"cabinet": "c1", "joint": f"joint_{i}", "success": ok}) + "\n"
+    records.write_text("".join(json.dumps({"cabinet": "c1", "joint": f"joint_{i}", "hand": "skeleton",
+                                           "solver": "bc-fasterrcnn", "success": ok}) + "\n"
                                for i, ok in [(0, True), (1, False), (2, True), (3, False), (3, True)]))
     assert tool.tally(records, tmp_path / "cabs", 0.5) == {"drawer": [1, 1], "flap": [0, 1], "door": [1, 1],
                                                             "wide door": [1, 2]}

@@ -4,8 +4,8 @@ physics, depth sensor, instruction, the hand's start), each at a ``mild`` and a 
 
 An axis is one object (`Axis`): its name, the numbers of its two levels, its draw for one scene and
 where that draw applies (the camera's pose, the hand's start, the scene's MJCF before it compiles,
-the compiled model, the depth sensor, the instruction). `AXIS_LIST` lists them; `PerturbConfig` holds them and the checks
-that keep a perturbed scene valid (documented in docs/robustness.md). A perturbation is written
+the compiled model, the depth sensor, the instruction). `AXIS_LIST` lists them; `PerturbConfig` holds
+them and the checks that keep a perturbed scene valid (documented in docs/robustness.md). A perturbation is written
 ``AXIS=LEVEL`` (several joined by commas, e.g. ``camera_pose=mild,light=strong``); `parse_perturb`
 checks and canonicalises it. `SceneShift.draw` is the one place where axes are drawn: from the
 scene's seed (`evaluation.episode.scene_seed`: the episode seed and the cabinet), each axis from its
