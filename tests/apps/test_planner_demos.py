@@ -439,6 +439,23 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     def outcomes(text):
         return sorted((r["key"], r["success"], r["open_ratio"]) for r in map(json.loads, text.splitlines()))
     assert outcomes((folder / "round_1.hdf5.episodes.jsonl").read_text()) == outcomes(log)
+    # kept rounds replaced (another run's round 0, round 1 gone): the work folder's rollouts were made
+    # by the old round 0, so they are made again, never mixed in; the final policy is trained again
+    from opend_mj.apps.dagger import file_sha256
+
+    other = torch.load(keep / "round_0.pt", weights_only=True)
+    other["model"] = {k: (v * 0.5 if v.is_floating_point() else v) for k, v in other["model"].items()}
+    torch.save(other, keep / "round_0.pt")
+    for f in keep.glob("round_1.*"):
+        f.unlink()
+    final_time = (folder / "final.pt").stat().st_mtime_ns
+    replaced = CliRunner().invoke(main, args)
+    assert replaced.exit_code == 0, replaced.output
+    assert "made by another policy or recipe: made again" in replaced.output
+    maker = json.loads((folder / "round_1.maker.json").read_text())
+    assert maker["policy_sha256"] == file_sha256(keep / "round_0.pt")
+    assert len((folder / "round_1.hdf5.episodes.jsonl").read_text().splitlines()) == len(log.splitlines())
+    assert (folder / "final.pt").stat().st_mtime_ns != final_time
 
 
 @pytest.fixture(scope="module")

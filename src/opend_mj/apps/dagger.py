@@ -349,6 +349,10 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
                 jobs += make_jobs(Path(more), [hand], "oracle", split="all",
                                   seed=config.rollout_seed + round_)[:config.limit]
             data = folder / f"round_{round_}.hdf5"
+            if not rollouts_made_by(folder, round_, {"policy_sha256": file_sha256(previous), "beta": rollout.beta,
+                                                     "hold": hold, "revisit": revisit, "extra_cabinets": extra_dirs,
+                                                     "seed": config.rollout_seed + round_, "targets": len(jobs)}):
+                log(f"round {round_}: the rollouts in {folder} were made by another policy or recipe: made again")
             log(f"round {round_}: rollouts of {previous.name} on {len(jobs)} targets (episode seed "
                 f"{config.rollout_seed + round_}), beta {rollout.beta:g}")
             timed("rollouts", seconds, lambda: record_demos(
@@ -403,7 +407,7 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     labelled = rollouts_of(data_files)
     steps, init = config.final_training(bc_config.steps, best)
     plan = {"from_round": summary["chosen"], "rounds": config.rounds, "steps": steps, "demos": len(all_demos),
-            "rollouts": len(labelled), "warm_start": init is not None}
+            "rollouts": len(labelled), "warm_start": init is not None, "from_sha256": file_sha256(best)}
     done = folder / "final.plan.json"
     if final.is_file() and done.is_file() and json.loads(done.read_text()) == plan:
         log(f"final: {final} already trained for these rounds")
@@ -421,6 +425,30 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
     return summary
 
 
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def rollouts_made_by(folder: Path, round_: int, maker: dict) -> bool:
+    """Whether round ``round_``'s rollout files in the work ``folder`` (the round's and its revisits',
+    with their episode logs) were made by ``maker`` (the policy's SHA-256 and the rollout's settings).
+    Files made by another maker (a work folder left by an earlier run whose kept rounds were since
+    replaced, or another recipe) are deleted, so that resuming never mixes another policy's states
+    into a round; the maker is then written as ``round_<i>.maker.json``. Files from before makers
+    were written are taken as this maker's. Returns False where files were deleted."""
+    stamp = folder / f"round_{round_}.maker.json"
+    files = [*folder.glob(f"round_{round_}.hdf5*"), *folder.glob(f"round_{round_}_revisit_*.hdf5*")]
+    agrees = not stamp.is_file() or json.loads(stamp.read_text()) == maker
+    if not agrees:
+        for f in files:
+            f.unlink(missing_ok=True)
+    stamp.write_text(json.dumps(maker, indent=1) + "\n")
+    return agrees
+
+
 def save_half(src: Path, dst: Path) -> None:
     """Copy the checkpoint ``src`` of `bc_train.train_bc` to ``dst`` with its weights as float16
     (half the bytes; the policy loads them as float32)."""
@@ -434,5 +462,5 @@ def save_half(src: Path, dst: Path) -> None:
     tmp.replace(dst)
 
 
-__all__ = ["DaggerConfig", "Rollout", "best_round", "failed_targets", "kept_rounds", "rollout_episode", "run_dagger", "save_half", "split_cabinets",
+__all__ = ["DaggerConfig", "Rollout", "best_round", "failed_targets", "file_sha256", "kept_rounds", "rollout_episode", "rollouts_made_by", "run_dagger", "save_half", "split_cabinets",
            "validation_figures"]
