@@ -114,7 +114,9 @@ expert-check: install
 ## HAND=allegro DAGGER=3 (rounds after round 0) SEEDS=2 STEPS=3000 (round 0) ROUND_STEPS=2000 (later
 ## rounds, warm-started) FINAL_STEPS=6000 REVISIT=1 (each round's failed rollouts rolled out again, at
 ## other seeds) HOLD=1 (rollouts go on to the policy's stop after the expert's plan opened the part,
-## labelled "stay"); kept rounds keep their own; BC_ARGS: more `opend train-policy` options (--grasp-token).
+## labelled "stay") MEMBERS=1 (the final policy: a seed ensemble of this many members, each trained as the
+## final policy with the next seed, bundled); kept rounds keep their own; BC_ARGS: more `opend train-policy`
+## options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3
 REVISIT ?= 1
@@ -123,6 +125,7 @@ SEEDS ?= 2
 STEPS ?= 3000
 ROUND_STEPS ?= 2000
 FINAL_STEPS ?= 6000
+MEMBERS ?= 1
 SEED ?= 0
 BC_DIR ?= build/bc/$(HAND)
 ## LONG_DOORS=N: N extra training cabinets of the long_door family (`opend generate --family long_door`,
@@ -147,7 +150,7 @@ ifneq ($(LONG_DOORS),0)
 		echo "train-bc: long-door cabinets and their demonstrations $$(( $$(date +%s) - t )) s"
 endif
 	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 $(LONG_ARGS) --hand $(HAND) --steps $(STEPS) \
-		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --revisit $(REVISIT) \
+		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --final-members $(MEMBERS) --revisit $(REVISIT) \
 		$(if $(filter 1,$(HOLD)),--hold-after-plan,--no-hold-after-plan) \
 		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
 		--workers $(WORKERS) --threads $(BC_THREADS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \

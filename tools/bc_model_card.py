@@ -60,12 +60,14 @@ def make_defaults(root: Path = ROOT) -> dict[str, str]:
     return out
 
 
-def recipe_command(hand: str, rounds: list[dict], extra: list, root: Path = ROOT) -> str:
-    """The `make train-bc` command that makes a policy of ``rounds`` (kept round figures) and extra
-    training cabinets ``extra``: the Makefile's defaults, overridden where the policy's rounds differ."""
+def recipe_command(hand: str, rounds: list[dict], extra: list, root: Path = ROOT, members: int = 1) -> str:
+    """The `make train-bc` command that makes a policy of ``rounds`` (kept round figures), extra
+    training cabinets ``extra`` and ``members`` final members: the Makefile's defaults, overridden
+    where the policy was made otherwise."""
     defaults = make_defaults(root)
     later = rounds[1:] or [{}]
-    made = {"REVISIT": str(later[0].get("revisit", 0)), "HOLD": "1" if later[0].get("hold") else "0"}
+    made = {"REVISIT": str(later[0].get("revisit", 0)), "HOLD": "1" if later[0].get("hold") else "0",
+            "MEMBERS": str(members)}
     args = [f"{k}={v}" for k, v in made.items() if defaults.get(k, v) != v]
     if bool(extra) != (defaults.get("LONG_DOORS", "0") != "0"):
         args.append("LONG_DOORS=0" if not extra else "LONG_DOORS=N")
@@ -132,13 +134,16 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                 f"{_seconds(rounds, 'validation')}")
         rows.append(("cost on 2 cores", cost + " (wall seconds of the run that made each round; a resumed "
                                                "round counts only what that run did)"))
+    members = final.get("members") or [{}]
     if final:
+        seeds = (f"{len(members)} members of seeds {', '.join(str(m['seed']) for m in members)} bundled as one seed "
+                 f"ensemble" if len(members) > 1 else f"seed {config['seed']}")
         rows.append(("final policy", f"every training cabinet ({final.get('demos')} demonstrations + "
                                      f"{final.get('rollouts')} labelled rollouts, {summary['samples']:,} samples), "
                                      f"from round {final.get('from_round')}'s weights, {final.get('steps')} steps "
-                                     f"(batch {config['batch_size']}, AdamW lr {config['lr']:g}, seed "
-                                     f"{config['seed']}, torch threads {summary.get('threads', 1)}): "
-                                     f"{summary['seconds']:.0f} s"))
+                                     f"(batch {config['batch_size']}, AdamW lr {config['lr']:g}, {seeds}, "
+                                     f"torch threads {summary.get('threads', 1)}): "
+                                     f"{summary['seconds']:.0f} s" + (" per member" if len(members) > 1 else "")))
     rows.append(("stop", f"{summary['stop_time']:.1f} s of simulated time (95th percentile of the training "
                          "episodes' lengths)"))
     test = _test_cells(root / "results" / "bc" / f"{hand}_shipped_test.jsonl")
@@ -156,8 +161,9 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                      f"{_cells_text(cell)}. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
     intro = textwrap.fill(
              f"`opend run --policy bc --hand {hand}` loads this checkpoint (`opend_mj.policy.bc_agent.BCAgent`). "
-             f"It is one model, made by the recipe every hand shares: `{recipe_command(hand, rounds, extra, root)}` "
-             "(docs/demonstrations.md, \"The planner as an interactive expert, and DAgger\"), trained on generated "
+             + ("It is one model" if len(members) == 1 else f"It is a seed ensemble of {len(members)} models")
+             + f", made by the recipe every hand shares: `{recipe_command(hand, rounds, extra, root, len(members))}` "
+             + "(docs/demonstrations.md, \"The planner as an interactive expert, and DAgger\"), trained on generated "
              f"cabinets only. `bc_{hand}.json` holds its training summary, loss history and DAgger rounds; each "
              f"round's policy and figures are kept in `bc_rounds/{hand}/`, from which a later run continues. "
              f"Written by `python tools/bc_model_card.py --hand {hand}` from those files and the results.", 110)

@@ -458,6 +458,33 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     assert (folder / "final.pt").stat().st_mtime_ns != final_time
 
 
+def test_dagger_final_members_make_a_seed_ensemble_that_resumes(demos_file, small_dataset, tmp_path):
+    """`--final-members 2`: the final policy is two members trained alike from the best round with
+    seeds 0 and 1, bundled into --out, which the agent loads as their ensemble; a second run trains
+    neither again."""
+    import torch
+
+    from opend_mj.policy.learned.bc_model import load_policies
+
+    out, _ = demos_file
+    folder, keep, policy = tmp_path / "dagger", tmp_path / "kept", tmp_path / "bc.pt"
+    args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(policy), "--steps", "10",
+            "--batch-size", "16", "--d-model", "16", "--dagger", "0", "--cabinets", str(small_dataset), "--dagger-dir",
+            str(folder), "--keep-rounds", str(keep), "--val-targets", "1", "--final-steps", "10",
+            "--final-members", "2", "--no-progress"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    final = json.loads(policy.with_suffix(".json").read_text())["dagger"]["final"]
+    assert [m["seed"] for m in final["members"]] == [0, 1]
+    members = load_policies([policy])
+    assert len(members) == 2 and [c.seed for _, c, _ in members] == [0, 1]
+    a, b = (m.state_dict() for m, _, _ in members)
+    assert any(not torch.equal(a[k], b[k]) for k in a)  # other seeds, other weights
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0, again.output
+    assert again.output.count("already trained for these rounds") == 2
+
+
 @pytest.fixture(scope="module")
 def long_door_dataset(tmp_path_factory):
     """One compiled cabinet of the long_door family (`opend generate --family`), id proc_2000."""

@@ -97,6 +97,11 @@ class DaggerConfig:
     #: training cabinets from `opend generate --family` (their demonstrations come in ``demo_files``);
     #: validation stays on the main dataset's held-out training cabinets.
     extra_cabinets: tuple[str, ...] = ()
+    #: The final policy is a seed ensemble of this many members, each trained as the final policy is
+    #: (the same rounds' data, from the same best round) with seeds ``seed``, ``seed + 1``, ...: their
+    #: batches and dropout differ, so they err differently, and the agent averages their chunks
+    #: (`bc_agent.BCAgent`, `bc_model.bundle_policies`). 1: one policy.
+    final_members: int = 1
 
     def beta(self, round_: int) -> float:
         return float(self.beta0 * self.beta_decay ** (round_ - 1))
@@ -402,25 +407,34 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         summary["rounds"].append({**entry, "checkpoint": str(ckpt)})
         summary["chosen"] = best_round(summary)["round"]
         (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
-    final = folder / "final.pt"
     best = keep / f"round_{summary['chosen']}.pt"
     labelled = rollouts_of(data_files)
     steps, init = config.final_training(bc_config.steps, best)
     plan = {"from_round": summary["chosen"], "rounds": config.rounds, "steps": steps, "demos": len(all_demos),
             "rollouts": len(labelled), "warm_start": init is not None, "from_sha256": file_sha256(best)}
-    done = folder / "final.plan.json"
-    if final.is_file() and done.is_file() and json.loads(done.read_text()) == plan:
-        log(f"final: {final} already trained for these rounds")
-        summary["final"] = {"checkpoint": str(final), **plan}
-    else:
-        log(f"final: training on {len(all_demos)} demonstrations (every training cabinet) and {len(labelled)} "
-            f"labelled rollouts ({steps} steps{', from ' + str(init) if init else ''})")
+    summary["final"] = {**plan, "members": []}
+    for member in range(config.final_members):
+        # member 0 is `final.pt` (as before ensembles), member i `final_<i>.pt`, seed ``seed + i``
+        final = folder / ("final.pt" if member == 0 else f"final_{member}.pt")
+        wanted = {**plan, **({"member": member, "seed": config.seed + member} if member else {})}
+        done = final.with_suffix(".plan.json")
+        made = json.loads(done.read_text()) if final.is_file() and done.is_file() else None
+        if made is not None and "from_sha256" not in made:  # plans from before hashes: taken as this round's
+            made["from_sha256"] = plan["from_sha256"]
         seconds = {}
-        timed("training", seconds, lambda: train_bc(
-            all_demos + labelled, hand, replace(bc_config, seed=config.seed, steps=steps), out=final,
-            progress=progress, threads=threads, init=init))
-        done.write_text(json.dumps(plan) + "\n")
-        summary["final"] = {"checkpoint": str(final), **plan, "seconds": seconds}
+        if made == wanted:
+            log(f"final: {final} already trained for these rounds")
+        else:
+            log(f"final{f' member {member}' if config.final_members > 1 else ''}: training on {len(all_demos)} "
+                f"demonstrations (every training cabinet) and {len(labelled)} labelled rollouts ({steps} steps"
+                f"{', from ' + str(init) if init else ''}, seed {config.seed + member})")
+            timed("training", seconds, lambda: train_bc(
+                all_demos + labelled, hand, replace(bc_config, seed=config.seed + member, steps=steps), out=final,
+                progress=progress, threads=threads, init=init))
+            done.write_text(json.dumps(wanted) + "\n")
+        summary["final"]["members"].append({"checkpoint": str(final), "seed": config.seed + member,
+                                            **({"seconds": seconds} if seconds else {})})
+    summary["final"]["checkpoint"] = summary["final"]["members"][0]["checkpoint"]
     (folder / "dagger.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary
 

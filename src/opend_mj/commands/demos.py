@@ -125,6 +125,9 @@ def demos(hands, solver, split, cabinets_dir, cabinet_ids, seeds, limit, out, im
               help="DAgger: roll out the first K training targets only [all].")
 @click.option("--final-steps", type=click.IntRange(min=1), default=None,
               help="DAgger: optimiser steps of the final policy, trained on every training cabinet [--steps].")
+@click.option("--final-members", type=click.IntRange(min=1), default=1, show_default=True,
+              help="DAgger: the final policy is a seed ensemble of this many members, each trained as the final "
+                   "policy with seeds --seed, --seed + 1, ... and bundled into --out (`opend bundle-policy`).")
 @click.option("--round-steps", type=click.IntRange(min=1), default=None,
               help="DAgger: optimiser steps of the rounds after round 0 [--steps].")
 @click.option("--revisit", type=click.IntRange(min=0), default=0, show_default=True,
@@ -142,8 +145,8 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
                  init,
                  warm_start, threads, device, dagger_rounds, cabinets_dir, extra_cabinets, dagger_dir, keep_rounds,
                  beta0, beta_decay,
-                 dagger_targets, final_steps, round_steps, revisit, hold_after_plan, val_targets, workers,
-                 progress):
+                 dagger_targets, final_steps, final_members, round_steps, revisit, hold_after_plan, val_targets,
+                 workers, progress):
     """Train the behaviour-cloning policy (a transformer over action chunks) from demonstrations."""
     import dataclasses
 
@@ -165,7 +168,8 @@ def train_policy(demo_files, hand, out, max_demos, steps, batch_size, lr, chunk,
         dagger = DaggerConfig(rounds=dagger_rounds, beta0=beta0, beta_decay=beta_decay, seed=seed,
                               limit=dagger_targets, val_limit=val_targets, final_steps=final_steps,
                               warm_start=warm_start, init=init, round_steps=round_steps, revisit=revisit,
-                              hold=hold_after_plan, extra_cabinets=tuple(str(d) for d in extra_cabinets))
+                              hold=hold_after_plan, extra_cabinets=tuple(str(d) for d in extra_cabinets),
+                              final_members=final_members)
         _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, dagger_dir, keep_rounds, workers,
                            threads, progress)
         return
@@ -196,13 +200,22 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
                              threads=threads, progress=progress, log=click.echo, keep=keep)
     except (ValueError, FileNotFoundError, DemoFileError) as exc:
         raise click.ClickException(str(exc)) from exc
-    final = Path(summary["final"]["checkpoint"])
-    save_half(final, out)
-    trained = json.loads(final.with_suffix(".json").read_text())
+    members = [Path(m["checkpoint"]) for m in summary["final"]["members"]]
+    if len(members) == 1:
+        save_half(members[0], out)
+    else:  # float16 members bundled into one seed ensemble
+        from opend_mj.policy.learned.bc_model import bundle_policies
+
+        halves = [m.with_suffix(".half.pt") for m in members]
+        for m, h in zip(members, halves):
+            save_half(m, h)
+        bundle_policies(halves, out)
+    trained = json.loads(members[0].with_suffix(".json").read_text())
     out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
                                                            for r in summary["rounds"])
-               + f"; final policy (from round {summary['chosen']}, every training cabinet) -> {out}")
+               + f"; final policy (from round {summary['chosen']}, every training cabinet"
+               + (f", {len(members)} seeds" if len(members) > 1 else "") + f") -> {out}")
 
 
 @click.command("bundle-policy")
