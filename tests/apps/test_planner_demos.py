@@ -386,7 +386,8 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     its own episode seed, the planner as expert labels every state it reaches (the rollouts are
     training data whether or not they opened their part), trains again from round 0's weights, and
     each round is validated on cabinets kept apart and kept (float16 policy and figures) in
-    --keep-rounds; the final policy trains on every training cabinet from the best round. A second
+    --keep-rounds; the final policy trains on every training cabinet from the best round, as two
+    members of seeds 0 and 1 (`--final-members 2`) that the agent loads as one ensemble. A second
     run runs no episode and trains nothing again; a run with the build folder gone records the
     rollouts again from the kept policies, the same episodes, and trains no kept round again."""
     import torch
@@ -400,10 +401,16 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(tmp_path / "bc.pt"), "--steps", "20",
             "--batch-size", "16", "--d-model", "16", "--dagger", "1", "--cabinets", str(small_dataset), "--dagger-dir",
             str(folder), "--keep-rounds", str(keep), "--dagger-targets", "2", "--val-targets", "1",
-            "--final-steps", "30", "--no-progress"]
+            "--final-steps", "30", "--final-members", "2", "--no-progress"]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     summary = json.loads((tmp_path / "bc.json").read_text())["dagger"]
+    from opend_mj.policy.learned.bc_model import load_policies
+
+    members = load_policies([tmp_path / "bc.pt"])
+    assert [m["seed"] for m in summary["final"]["members"]] == [0, 1] == [c.seed for _, c, _ in members]
+    a, b = (m.state_dict() for m, _, _ in members)
+    assert any(not torch.equal(a[k], b[k]) for k in a)  # other seeds, other weights
     assert [r["round"] for r in summary["rounds"]] == [0, 1]
     assert all(r["val_episodes"] == 1 and 0.0 <= r["val_success"] <= 100.0 for r in summary["rounds"])
     assert summary["rounds"][1]["rollouts"] >= 1 and summary["rounds"][1]["beta"] == 0.5
@@ -430,6 +437,7 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     assert again.exit_code == 0, again.output
     assert (folder / "round_1.hdf5.episodes.jsonl").read_text() == log
     assert (folder / "final.pt").stat().st_mtime_ns == final_time
+    assert again.output.count("already trained for these rounds") == 2
     import shutil
 
     shutil.rmtree(folder)  # a fresh checkout: only the kept rounds
@@ -456,33 +464,6 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
     assert maker["policy_sha256"] == file_sha256(keep / "round_0.pt")
     assert len((folder / "round_1.hdf5.episodes.jsonl").read_text().splitlines()) == len(log.splitlines())
     assert (folder / "final.pt").stat().st_mtime_ns != final_time
-
-
-def test_dagger_final_members_make_a_seed_ensemble_that_resumes(demos_file, small_dataset, tmp_path):
-    """`--final-members 2`: the final policy is two members trained alike from the best round with
-    seeds 0 and 1, bundled into --out, which the agent loads as their ensemble; a second run trains
-    neither again."""
-    import torch
-
-    from opend_mj.policy.learned.bc_model import load_policies
-
-    out, _ = demos_file
-    folder, keep, policy = tmp_path / "dagger", tmp_path / "kept", tmp_path / "bc.pt"
-    args = ["train-policy", "--demos", str(out), "--hand", "franka", "--out", str(policy), "--steps", "10",
-            "--batch-size", "16", "--d-model", "16", "--dagger", "0", "--cabinets", str(small_dataset), "--dagger-dir",
-            str(folder), "--keep-rounds", str(keep), "--val-targets", "1", "--final-steps", "10",
-            "--final-members", "2", "--no-progress"]
-    result = CliRunner().invoke(main, args)
-    assert result.exit_code == 0, result.output
-    final = json.loads(policy.with_suffix(".json").read_text())["dagger"]["final"]
-    assert [m["seed"] for m in final["members"]] == [0, 1]
-    members = load_policies([policy])
-    assert len(members) == 2 and [c.seed for _, c, _ in members] == [0, 1]
-    a, b = (m.state_dict() for m, _, _ in members)
-    assert any(not torch.equal(a[k], b[k]) for k in a)  # other seeds, other weights
-    again = CliRunner().invoke(main, args)
-    assert again.exit_code == 0, again.output
-    assert again.output.count("already trained for these rounds") == 2
 
 
 @pytest.fixture(scope="module")
