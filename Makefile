@@ -114,9 +114,7 @@ expert-check: install
 ## HAND=allegro DAGGER=3 (rounds after round 0) SEEDS=2 STEPS=3000 (round 0) ROUND_STEPS=2000 (later
 ## rounds, warm-started) FINAL_STEPS=6000 REVISIT=1 (each round's failed rollouts rolled out again, at
 ## other seeds) HOLD=1 (rollouts go on to the policy's stop after the expert's plan opened the part,
-## labelled "stay") MEMBERS=1 (the final policy: a seed ensemble of this many members, each trained as the
-## final policy with the next seed, bundled); kept rounds keep their own; BC_ARGS: more `opend train-policy`
-## options (--grasp-token).
+## labelled "stay"); kept rounds keep their own; BC_ARGS: more `opend train-policy` options (--grasp-token).
 HAND ?= allegro
 DAGGER ?= 3
 REVISIT ?= 1
@@ -125,40 +123,60 @@ SEEDS ?= 2
 STEPS ?= 3000
 ROUND_STEPS ?= 2000
 FINAL_STEPS ?= 6000
-MEMBERS ?= 1
 SEED ?= 0
-BC_DIR ?= build/bc/$(HAND)
 ## LONG_DOORS=N: N extra training cabinets of the long_door family (`opend generate --family long_door`,
 ## built into LONG_DIR), their demonstrations, and their targets rolled out in every DAgger round
 ## (`--extra-cabinets`); 0: none.
 LONG_DOORS ?= 0
 LONG_DIR ?= build/cabinets-long
-LONG_ARGS = $(if $(filter-out 0,$(LONG_DOORS)),--demos $(BC_DIR)/demos_long.hdf5 --extra-cabinets $(LONG_DIR))
+## VARIANT=name: another DAgger run of the hand, on the hand's own demonstrations, kept apart: its
+## rounds and final policy in checkpoints/bc_rounds/$(HAND)-name/, its work in build/bc/$(HAND)-name/.
+## ENSEMBLE (default ENSEMBLE_<hand>): variants, each made with its VARIANT_<name> settings, whose final
+## policies the shipped checkpoint averages with this run's (`opend bundle-policy`; the main run's final
+## policy is then kept in checkpoints/bc_rounds/$(HAND)/final.pt): runs trained on other data err
+## differently, and their mean errs less.
+VARIANT ?=
+VARIANT_long = LONG_DOORS=80
+ENSEMBLE_skeleton = long
+ENSEMBLE ?= $(ENSEMBLE_$(HAND))
+RUN = $(HAND)$(if $(VARIANT),-$(VARIANT))
+DEMO_DIR ?= build/bc/$(HAND)
+BC_DIR ?= build/bc/$(RUN)
+KEEP = checkpoints/bc_rounds/$(RUN)
+POLICY_OUT = $(if $(VARIANT)$(ENSEMBLE),$(KEEP)/final.pt,checkpoints/bc_$(HAND).pt)
+LONG_ARGS = $(if $(filter-out 0,$(LONG_DOORS)),--demos $(DEMO_DIR)/demos_long.hdf5 --extra-cabinets $(LONG_DIR))
 ## BC_THREADS: torch threads of training (both cores by default; 1 where another job shares them:
 ## more threads than free cores slow training many times over)
 BC_THREADS ?= $(WORKERS)
 BC_ARGS ?=
 train-bc: install assets
 	@t=$$(date +%s); $(BIN)/opend demos --cabinets $(CABINETS) --hand $(HAND) --split train --seeds $(SEEDS) \
-		--solver oracle --workers $(WORKERS) --out $(BC_DIR)/demos.hdf5 && \
+		--solver oracle --workers $(WORKERS) --out $(DEMO_DIR)/demos.hdf5 && \
 		echo "train-bc: demonstrations $$(( $$(date +%s) - t )) s"
 ifneq ($(LONG_DOORS),0)
 	@t=$$(date +%s); $(BIN)/opend generate --family long_door --start 2000 --count $(LONG_DOORS) \
 		--out $(LONG_DIR)-src && $(BIN)/opend build-assets --source $(LONG_DIR)-src --out $(LONG_DIR) \
 		--workers $(WORKERS) --no-progress && $(BIN)/opend demos --cabinets $(LONG_DIR) --hand $(HAND) --split all \
-		--seeds $(SEEDS) --solver oracle --workers $(WORKERS) --out $(BC_DIR)/demos_long.hdf5 && \
+		--seeds $(SEEDS) --solver oracle --workers $(WORKERS) --out $(DEMO_DIR)/demos_long.hdf5 && \
 		echo "train-bc: long-door cabinets and their demonstrations $$(( $$(date +%s) - t )) s"
 endif
-	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(BC_DIR)/demos.hdf5 $(LONG_ARGS) --hand $(HAND) --steps $(STEPS) \
-		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --final-members $(MEMBERS) --revisit $(REVISIT) \
+	@t=$$(date +%s); $(BIN)/opend train-policy --demos $(DEMO_DIR)/demos.hdf5 $(LONG_ARGS) --hand $(HAND) --steps $(STEPS) \
+		--seed $(SEED) --dagger $(DAGGER) --round-steps $(ROUND_STEPS) --final-steps $(FINAL_STEPS) --revisit $(REVISIT) \
 		$(if $(filter 1,$(HOLD)),--hold-after-plan,--no-hold-after-plan) \
-		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds checkpoints/bc_rounds/$(HAND) \
-		--workers $(WORKERS) --threads $(BC_THREADS) $(BC_ARGS) --out checkpoints/bc_$(HAND).pt && \
-		echo "train-bc: DAgger rounds and final policy $$(( $$(date +%s) - t )) s"
+		--cabinets $(CABINETS) --dagger-dir $(BC_DIR)/dagger --keep-rounds $(KEEP) \
+		--workers $(WORKERS) --threads $(BC_THREADS) $(BC_ARGS) --out $(POLICY_OUT) && \
+		echo "train-bc: $(RUN): DAgger rounds and final policy $$(( $$(date +%s) - t )) s"
+ifeq ($(VARIANT),)
+ifneq ($(ENSEMBLE),)
+	@$(foreach v,$(ENSEMBLE),$(MAKE) --no-print-directory train-bc HAND=$(HAND) VARIANT=$(v) $(VARIANT_$(v)) &&) true
+	$(BIN)/opend bundle-policy $(POLICY_OUT) $(foreach v,$(ENSEMBLE),checkpoints/bc_rounds/$(HAND)-$(v)/final.pt) \
+		--out checkpoints/bc_$(HAND).pt
+endif
 	@t=$$(date +%s); rm -f results/bc/$(HAND)_shipped_test.jsonl; $(BIN)/opend run --policy bc \
 		--policy-arg checkpoint=checkpoints/bc_$(HAND).pt --hand $(HAND) --split test --cabinets $(CABINETS) \
 		--workers $(WORKERS) --out results/bc/$(HAND)_shipped_test.jsonl && \
 		echo "train-bc: test split $$(( $$(date +%s) - t )) s"
+endif
 
 ## System libraries for off-screen rendering (EGL through Mesa; no GPU needed).
 system-deps:

@@ -83,3 +83,26 @@ def test_the_shipped_policies_model_cards_are_current(load_tool):
     assert hands, "no shipped behaviour-cloning checkpoint"
     stale = [h for h in hands if (ROOT / "checkpoints" / f"bc_{h}.md").read_text() != model_card(h)]
     assert stale == [], f"regenerate with python tools/bc_model_card.py --hand {' --hand '.join(stale)}"
+
+
+def test_a_shipped_ensemble_is_the_bundle_of_its_kept_runs_final_policies():
+    """A shipped checkpoint that bundles several DAgger runs (`ENSEMBLE_<hand>` in the Makefile) holds
+    exactly the final policies kept in checkpoints/bc_rounds/<hand>[-<variant>]/final.pt, in the
+    Makefile's order: what `make train-bc` bundles is what ships, and each member's run can continue."""
+    import torch
+
+    from opend_mj.policy.learned.checkpoint_io import read_checkpoint
+
+    make = (ROOT / "Makefile").read_text()
+    for path in sorted((ROOT / "checkpoints").glob("bc_*.pt")):
+        hand = path.stem[3:]
+        ckpt = read_checkpoint(path, "behaviour-cloning policy checkpoint")
+        line = next((ln for ln in make.splitlines() if ln.startswith(f"ENSEMBLE_{hand} =")), None)
+        if "members" not in ckpt:
+            assert line is None, f"{path}: one policy, but the Makefile bundles {hand} runs"
+            continue
+        runs = [hand] + [f"{hand}-{v}" for v in line.partition("=")[2].split()]
+        kept = [read_checkpoint(ROOT / "checkpoints" / "bc_rounds" / run / "final.pt", "final") for run in runs]
+        assert len(ckpt["members"]) == len(kept)
+        for member, final in zip(ckpt["members"], kept):
+            assert all(torch.equal(member["model"][k], final["model"][k]) for k in final["model"])

@@ -60,6 +60,33 @@ def make_defaults(root: Path = ROOT) -> dict[str, str]:
     return out
 
 
+def make_variants(root: Path = ROOT) -> dict[str, str]:
+    """The Makefile's ``VARIANT_<name> = SETTINGS`` lines: the settings of each DAgger run variant."""
+    out = {}
+    for line in (root / "Makefile").read_text().splitlines():
+        name, sep, value = line.partition("=")
+        if sep and name.strip().startswith("VARIANT_") and not name.endswith(("?", ":", "+")):
+            out[name.strip()[len("VARIANT_"):]] = value.strip()
+    return out
+
+
+def ensemble_row(hand: str, bundle: dict, root: Path = ROOT) -> str:
+    """The card's text on a shipped bundle of several DAgger runs' final policies: each member's run,
+    its make settings and its rounds' validation figures."""
+    from opend_mj.apps.dagger import kept_rounds
+
+    variants = make_variants(root)
+    parts = []
+    for i, source in enumerate(bundle["sources"]):
+        folder = Path(source).parent
+        variant = folder.name[len(hand) + 1:] if folder.name.startswith(f"{hand}-") else ""
+        rounds = kept_rounds(root / folder)
+        how = "this card's run" if not variant else f"`VARIANT={variant} {variants.get(variant, '')}`".replace(" `", "`")
+        parts.append(f"{i}: `{source}` ({how}; validation " + " / ".join(f"{r['val_success']}" for r in rounds) + " %)")
+    return (f"{bundle['members']} final policies of DAgger runs on other data, their action chunks averaged every "
+            f"step (`opend bundle-policy`; `ENSEMBLE_{hand}` in the Makefile): " + "; ".join(parts))
+
+
 def recipe_command(hand: str, rounds: list[dict], extra: list, root: Path = ROOT, members: int = 1) -> str:
     """The `make train-bc` command that makes a policy of ``rounds`` (kept round figures), extra
     training cabinets ``extra`` and ``members`` final members: the Makefile's defaults, overridden
@@ -89,7 +116,9 @@ def model_card(hand: str, root: Path = ROOT) -> str:
     watch = int(config.get("watch") or 0)
     from opend_mj.evaluation.report import hand_title
 
+    bundle = summary.get("bundle")
     title = f"# Model card: `bc_{hand}.pt` (behaviour cloning with DAgger, {hand_title(hand)}" + (
+        f", an ensemble of {bundle['members']} runs" if bundle else "") + (
         ", watching the front)" if watch else ")")
     rows = [
         ("model", f"ACT-style transformer over action chunks ({config['d_model']} wide, {config['chunk']}-action "
@@ -144,8 +173,10 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                                      f"(batch {config['batch_size']}, AdamW lr {config['lr']:g}, {seeds}, "
                                      f"torch threads {summary.get('threads', 1)}): "
                                      f"{summary['seconds']:.0f} s" + (" per member" if len(members) > 1 else "")))
-    rows.append(("stop", f"{summary['stop_time']:.1f} s of simulated time (95th percentile of the training "
-                         "episodes' lengths)"))
+    if bundle:
+        rows.append(("ensemble", ensemble_row(hand, bundle, root)))
+    rows.append(("stop", f"{(bundle or summary)['stop_time']:.1f} s of simulated time (95th percentile of the training "
+                         "episodes' lengths" + (", the members' mean)" if bundle else ")")))
     test = _test_cells(root / "results" / "bc" / f"{hand}_shipped_test.jsonl")
     if test:
         rows.append(("test, generated cabinets", f"`opend run --policy bc --hand {hand} --split test --out "
@@ -161,7 +192,8 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                      f"{_cells_text(cell)}. Records not committed; counts in `results/real/bc_{hand}_all.json`"))
     intro = textwrap.fill(
              f"`opend run --policy bc --hand {hand}` loads this checkpoint (`opend_mj.policy.bc_agent.BCAgent`). "
-             + ("It is one model" if len(members) == 1 else f"It is a seed ensemble of {len(members)} models")
+             + ("It is one model" if len(members) == 1 and not bundle else
+                f"It averages {bundle['members']} models" if bundle else f"It is a seed ensemble of {len(members)} models")
              + f", made by the recipe every hand shares: `{recipe_command(hand, rounds, extra, root, len(members))}` "
              + "(docs/demonstrations.md, \"The planner as an interactive expert, and DAgger\"), trained on generated "
              f"cabinets only. `bc_{hand}.json` holds its training summary, loss history and DAgger rounds; each "

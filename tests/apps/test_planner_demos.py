@@ -222,6 +222,9 @@ def test_seed_ensemble_averages_its_members_and_bundles_to_one_file(demos_file, 
     assert result.exit_code == 0 and "2 members" in result.output, result.output
     members = load_policies([bundle])
     assert len(members) == 2 and all(c.ensemble_decay == 0.1 for _, c, _ in members)
+    side = json.loads(bundle.with_suffix(".json").read_text())  # the first member's summary, and the bundle's
+    assert side["config"]["seed"] == 0 and side["bundle"]["members"] == 2
+    assert [m["config"]["seed"] for m in side["bundle"]["member_summaries"]] == [0, 1]
     # the ensemble's prediction is the mean of its members' (the agent averages exactly these)
     ctx, steps = torch.randn(1, members[0][2]["dims"]["ctx"]), torch.randn(1, 4, members[0][2]["dims"]["step"])
     a, b = (m.actions(ctx, steps) for m, _, _ in members)

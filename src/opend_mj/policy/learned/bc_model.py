@@ -473,6 +473,18 @@ def bundle_policies(paths, out, ensemble_decay: float | None = None, routes: dic
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_checkpoint(bundle, out)
+    # beside it: the first member's training summary (as `opend train-policy` writes one beside its
+    # checkpoint) with the bundle's, and every member file's own where it has one
+    import json
+
+    def trained(path):
+        side = Path(path).with_suffix(".json")
+        return json.loads(side.read_text()) if side.is_file() else None
+
+    first_summary = trained(paths[0]) or {}
+    first_summary.pop("bundle", None)
+    out.with_suffix(".json").write_text(json.dumps(
+        {**first_summary, "bundle": {**summary, "member_summaries": [trained(p) for p in paths]}}, indent=1) + "\n")
     return summary
 
 
