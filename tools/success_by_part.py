@@ -33,6 +33,8 @@ def tally(records: Path, cabinets: Path | None, wide: float) -> dict[str, list[i
     from opend_mj.evaluation.results import load_results
     from opend_mj.sim.cabinet import load_cabinet_info
 
+    if not Path(records).is_file():
+        raise SystemExit(f"{records}: no such records file")
     counts = {c: [0, 0] for c in CLASSES}
     infos: dict[Path, dict] = {}
     for r in load_results(records, repair=False):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 
 def _door(joint, axis, anchor, handle):
     return {"joint": joint, "type": "door", "axis": axis, "anchor": anchor, "handle": {"center": handle}}
@@ -30,3 +32,5 @@ def test_parts_are_classed_by_hinge_axis_and_handle_to_hinge_distance(tmp_path, 
                                                             "wide door": [1, 2]}
     assert tool.main([f"{records}@{tmp_path / 'cabs'}"]) == 0
     assert "| 1/1 | 0/1 | 1/1 | 1/2 | 3/5 |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="no such records file"):  # a typo is not a row of zeros
+        tool.main([f"{tmp_path / 'nope.jsonl'}@{tmp_path / 'cabs'}"])
