@@ -164,12 +164,14 @@ def test_written_checkpoints_are_plain_data(tmp_path):
 def test_every_shipped_checkpoint_loads_as_plain_data(name):
     """With torch.load(weights_only=True); the handle solvers' weights stay float16 (the files' size), and
     a behaviour-cloning policy's are float16 where the DAgger recipe shipped it (`apps.dagger.save_half`),
-    float32 in the older ones."""
+    float32 in the older ones; a bundle of several (`opend bundle-policy`) holds such policies."""
     ckpt = torch.load(CHECKPOINTS / name, map_location="cpu", weights_only=True)
-    assert isinstance(ckpt["model"], dict) and all(isinstance(v, torch.Tensor) for v in ckpt["model"].values())
-    floats = {v.dtype for v in ckpt["model"].values() if v.is_floating_point()}
-    assert floats in ({torch.float16}, {torch.float32}) if name.startswith("bc_") else floats == {torch.float16}
-    assert isinstance(ckpt["config"], dict)
+    models = ckpt["members"] if name.startswith("bc_") and "members" in ckpt else [ckpt]
+    for model in models:
+        assert isinstance(model["model"], dict) and all(isinstance(v, torch.Tensor) for v in model["model"].values())
+        floats = {v.dtype for v in model["model"].values() if v.is_floating_point()}
+        assert floats in ({torch.float16}, {torch.float32}) if name.startswith("bc_") else floats == {torch.float16}
+        assert isinstance(model["config"], dict)
 
 
 def test_the_shipped_checkpoints_are_found():
