@@ -86,6 +86,14 @@ class _Draw:
         return _size_for_rows(self.rng, self.cfg, n_rows, row_h, self.frame + (n_rows - 1) * self.t)
 
 
+def _door_beside(s: _Draw, stack: Split) -> Split:
+    """A side-hinged door beside ``stack``, hinged at the cabinet's outer edge: on the left with
+    ``left_hinge_share``, else on the right."""
+    if s.rng.random() < s.cfg.left_hinge_share:
+        return _cols((1.0, Leaf("door", "left")), (s.u(0.7, 1.0), stack))
+    return _cols((s.u(0.7, 1.0), stack), (1.0, Leaf("door", "right")))
+
+
 def _single_drawer(s: _Draw) -> Layout:
     w = s.u(0.35, 0.8)
     if s.rng.random() < s.cfg.nightstand_share:  # nightstand: drawer over an open shelf
@@ -153,10 +161,7 @@ def _door_beside_drawers(s: _Draw) -> Layout:
     n = int(s.rng.choice([k for k, _ in sizes], p=[w for _, w in sizes]))
     h = s.rows_h(n, (0.12, 0.25))
     stack = _drawer_stack(s.rng, s.cfg, n)
-    if s.rng.random() < s.cfg.left_hinge_share:
-        tree = _cols((1.0, Leaf("door", "left")), (s.u(0.7, 1.0), stack))
-    else:
-        tree = _cols((s.u(0.7, 1.0), stack), (1.0, Leaf("door", "right")))
+    tree = _door_beside(s, stack)
     return Layout(f"door_beside_{n}_drawers", w, h, s.depth, tree, True)
 
 
@@ -180,8 +185,8 @@ def _stacked_doors(s: _Draw) -> Layout:
     return Layout("stacked_doors", s.u(0.35, 0.6), s.u(1.0, 1.8), s.depth,
                   _rows((s.u(0.6, 1.0), Leaf("door", hinge)), (1.0, Leaf("door", hinge))), True)
 
-# ---- layouts that the language rule cannot describe
 
+# ---- layouts that the language rule cannot describe
 
 def _tall_drawer_stack(s: _Draw) -> Layout:
     n = int(s.rng.integers(6, 9))
@@ -200,10 +205,7 @@ def _stack_beside_door(s: _Draw) -> Layout:
     w = s.u(0.7, 1.2)
     h = s.rows_h(n, (0.08, 0.16))
     stack = _drawer_stack(s.rng, s.cfg, n)
-    if s.rng.random() < s.cfg.left_hinge_share:
-        tree = _cols((1.0, Leaf("door", "left")), (s.u(0.7, 1.0), stack))
-    else:
-        tree = _cols((s.u(0.7, 1.0), stack), (1.0, Leaf("door", "right")))
+    tree = _door_beside(s, stack)
     return Layout(f"door_beside_{n}_drawers", w, h, s.depth, tree, False)
 
 
