@@ -136,7 +136,7 @@ LONG_DIR ?= build/cabinets-long
 ## policy is then kept in checkpoints/bc_rounds/$(HAND)/final.pt): runs trained on other data err
 ## differently, and their mean errs less.
 VARIANT ?=
-VARIANT_long = LONG_DOORS=80
+VARIANT_long = LONG_DOORS=80 REVISIT=1 HOLD=1
 ENSEMBLE_skeleton = long
 ENSEMBLE ?= $(ENSEMBLE_$(HAND))
 RUN = $(HAND)$(if $(VARIANT),-$(VARIANT))
