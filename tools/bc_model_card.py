@@ -93,9 +93,10 @@ def recipe_command(hand: str, rounds: list[dict], extra: list, root: Path = ROOT
     where the policy was made otherwise."""
     defaults = make_defaults(root)
     later = rounds[1:] or [{}]
-    made = {"REVISIT": str(later[0].get("revisit", 0)), "HOLD": "1" if later[0].get("hold") else "0",
-            "MEMBERS": str(members)}
+    made = {"REVISIT": str(later[0].get("revisit", 0)), "HOLD": "1" if later[0].get("hold") else "0"}
     args = [f"{k}={v}" for k, v in made.items() if defaults.get(k, v) != v]
+    if members > 1:  # the Makefile has no variable of its own for it: passed through BC_ARGS
+        args.append(f'BC_ARGS="--final-members {members}"')
     if bool(extra) != (defaults.get("LONG_DOORS", "0") != "0"):
         args.append("LONG_DOORS=0" if not extra else "LONG_DOORS=N")
     return " ".join([f"make train-bc HAND={hand}", *args])
@@ -116,7 +117,10 @@ def model_card(hand: str, root: Path = ROOT) -> str:
     watch = int(config.get("watch") or 0)
     from opend_mj.evaluation.report import hand_title
 
-    bundle = summary.get("bundle")
+    members = final.get("members") or [{}]
+    # a bundle of several DAgger runs' final policies (`ENSEMBLE_<hand>`); one run's seed members
+    # (`--final-members`) are told on the final policy's row instead
+    bundle = summary.get("bundle") if len(members) == 1 else None
     title = f"# Model card: `bc_{hand}.pt` (behaviour cloning with DAgger, {hand_title(hand)}" + (
         f", an ensemble of {bundle['members']} runs" if bundle else "") + (
         ", watching the front)" if watch else ")")
@@ -163,7 +167,6 @@ def model_card(hand: str, root: Path = ROOT) -> str:
                 f"{_seconds(rounds, 'validation')}")
         rows.append(("cost on 2 cores", cost + " (wall seconds of the run that made each round; a resumed "
                                                "round counts only what that run did)"))
-    members = final.get("members") or [{}]
     if final:
         seeds = (f"{len(members)} members of seeds {', '.join(str(m['seed']) for m in members)} bundled as one seed "
                  f"ensemble" if len(members) > 1 else f"seed {config['seed']}")

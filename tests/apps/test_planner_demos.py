@@ -412,6 +412,7 @@ def test_dagger_rounds_label_the_policys_own_states_are_kept_and_resume(demos_fi
 
     members = load_policies([tmp_path / "bc.pt"])
     assert [m["seed"] for m in summary["final"]["members"]] == [0, 1] == [c.seed for _, c, _ in members]
+    assert json.loads((tmp_path / "bc.json").read_text())["bundle"]["seeds"] == [0, 1]
     a, b = (m.state_dict() for m, _, _ in members)
     assert any(not torch.equal(a[k], b[k]) for k in a)  # other seeds, other weights
     assert [r["round"] for r in summary["rounds"]] == [0, 1]

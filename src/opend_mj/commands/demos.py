@@ -201,6 +201,7 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
     except (ValueError, FileNotFoundError, DemoFileError) as exc:
         raise click.ClickException(str(exc)) from exc
     members = [Path(m["checkpoint"]) for m in summary["final"]["members"]]
+    bundled = {}
     if len(members) == 1:
         save_half(members[0], out)
     else:  # float16 members bundled into one seed ensemble
@@ -209,9 +210,11 @@ def _train_with_dagger(demo_files, hand, out, config, dagger, cabinets_dir, fold
         halves = [m.with_suffix(".half.pt") for m in members]
         for m, h in zip(members, halves):
             save_half(m, h)
-        bundle_policies(halves, out)
+        bundled = {"bundle": bundle_policies(halves, out)}
     trained = json.loads(members[0].with_suffix(".json").read_text())
-    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary}, indent=1) + "\n")
+    # member 0's training summary, the DAgger run's and (several members) the bundle's: the bundle's own
+    # .json would name the float16 copies, which have no training summary beside them
+    out.with_suffix(".json").write_text(json.dumps({**trained, "dagger": summary, **bundled}, indent=1) + "\n")
     click.echo("validation success per round: " + ", ".join(f"{r['round']}: {r['val_success']} %"
                                                            for r in summary["rounds"])
                + f"; final policy (from round {summary['chosen']}, every training cabinet"
