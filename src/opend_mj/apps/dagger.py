@@ -419,7 +419,8 @@ def run_dagger(demo_files, hand: str, cabinets_dir: Path, folder: Path, bc_confi
         wanted = {**plan, **({"member": member, "seed": config.seed + member} if member else {})}
         done = final.with_suffix(".plan.json")
         made = json.loads(done.read_text()) if final.is_file() and done.is_file() else None
-        if made is not None and "from_sha256" not in made:  # plans from before hashes: taken as this round's
+        # a plan written before plans named a hash is taken as made from the chosen round
+        if made is not None and "from_sha256" not in made:
             made["from_sha256"] = plan["from_sha256"]
         seconds = {}
         if made == wanted:
